@@ -1,0 +1,1 @@
+//! The fingertip's CAN protocol (work in progress).

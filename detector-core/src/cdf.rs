@@ -1,0 +1,497 @@
+//! Confidence distribution functions (the paper's ψ): a feature value in, a confidence out.
+//!
+//! Four shapes, as in the paper's figure 2, built from the fuzzy-logic S-function (two
+//! quadratic pieces meeting at the midpoint) so no exponential is needed:
+//!
+//! | shape | parameters | value |
+//! |---|---|---|
+//! | sigmoid (Σ) | `low < high`, `falling` | 0 below `low`, 1 above `high`, S-shaped between (mirrored when `falling`) |
+//! | bell (Π) | `center`, `half_width > 0` | 1 at `center`, ½ at `center ± half_width/2`, 0 beyond `± half_width` |
+//! | flat bell (Λ) | `low < plateau_low ≤ plateau_high < high` | 0 outside `[low, high]`, 1 on the plateau, S-shaped shoulders |
+//! | binary (Γ) | `threshold`, `above` | 1 when the value is ≥ `threshold` (`above`) or ≤ it (not `above`), else 0 |
+//!
+//! Parameters are in the feature's own unit. [`CdfSpec`] is what a user writes;
+//! [`Cdf::new`] validates it and precomputes the reciprocals so that evaluating costs one
+//! 32×32→64 multiplication per shoulder and no division.
+
+use crate::num::{Confidence, Signal};
+
+/// A confidence distribution function as a user describes it, parameters in the feature's
+/// unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(
+    feature = "serde",
+    serde(rename_all = "snake_case", deny_unknown_fields)
+)]
+pub enum CdfSpec {
+    /// Σ: rises from 0 at `low` to 1 at `high` (or falls, when `falling`).
+    Sigmoid {
+        /// Where the rise starts (confidence 0, or 1 when falling).
+        low: f32,
+        /// Where the rise ends (confidence 1, or 0 when falling).
+        high: f32,
+        /// Mirror the curve: 1 below `low`, 0 above `high`.
+        #[cfg_attr(feature = "serde", serde(default))]
+        falling: bool,
+    },
+    /// Π: 1 at `center`, falling symmetrically to 0 at `center ± half_width`.
+    Bell {
+        /// Where the confidence is 1.
+        center: f32,
+        /// Distance from the centre at which the confidence reaches 0; positive.
+        half_width: f32,
+    },
+    /// Λ: 1 on `[plateau_low, plateau_high]`, 0 outside `[low, high]`, S-shaped shoulders.
+    FlatBell {
+        /// Where the rising shoulder starts.
+        low: f32,
+        /// Where the plateau starts.
+        plateau_low: f32,
+        /// Where the plateau ends.
+        plateau_high: f32,
+        /// Where the falling shoulder ends.
+        high: f32,
+    },
+    /// Γ: 1 on one side of `threshold` (inclusive), 0 on the other.
+    Binary {
+        /// The switching value.
+        threshold: f32,
+        /// 1 for values ≥ `threshold` when true, for values ≤ `threshold` when false.
+        above: bool,
+    },
+}
+
+/// Why a [`CdfSpec`] was rejected.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum CdfError {
+    /// A parameter is NaN, infinite or outside the feature range of ±32768.
+    NotRepresentable {
+        /// The parameter's name.
+        param: &'static str,
+        /// Its value.
+        value: f32,
+    },
+    /// Two parameters are out of order (`first` must be below `second`, or at most
+    /// equal where the shape allows it).
+    OutOfOrder {
+        /// The parameter that must be smaller.
+        first: &'static str,
+        /// Its value.
+        first_value: f32,
+        /// The parameter that must be larger.
+        second: &'static str,
+        /// Its value.
+        second_value: f32,
+    },
+    /// A width is zero or negative, or shorter than the feature resolution (2⁻¹⁶).
+    TooNarrow {
+        /// The parameter's name.
+        param: &'static str,
+        /// Its value.
+        value: f32,
+    },
+}
+
+impl core::fmt::Display for CdfError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            CdfError::NotRepresentable { param, value } => {
+                write!(f, "{param} = {value} is not a finite value within ±32768")
+            }
+            CdfError::OutOfOrder {
+                first,
+                first_value,
+                second,
+                second_value,
+            } => write!(
+                f,
+                "{first} = {first_value} must be below {second} = {second_value}"
+            ),
+            CdfError::TooNarrow { param, value } => write!(
+                f,
+                "{param} = {value} must be positive and at least 2^-16 wide"
+            ),
+        }
+    }
+}
+
+/// A linear map from `[start, start + span]` onto `[0, 1]` in Q15, clamped at both ends.
+///
+/// `t = (x - start) · mul >> shift`, with `mul / 2^shift ≈ 2¹⁵ / span` chosen at build time so
+/// the product fits 64 bits and keeps 31 significant bits.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Ramp {
+    start: i32,
+    span: u32,
+    mul: u32,
+    shift: u8,
+}
+
+impl Ramp {
+    /// `start < end` in raw 16.16 bits; `None` if they are equal or reversed.
+    fn new(start: i32, end: i32) -> Option<Ramp> {
+        let span = end as i64 - start as i64;
+        if span <= 0 {
+            return None;
+        }
+        let span = span as u64; // 1..=2^32-1
+        let log2 = 63 - span.leading_zeros(); // floor(log2 span), 0..=31
+        let shift = 16 + log2;
+        // mul = round(2^(15+shift) / span) < 2^32 because span ≥ 2^log2.
+        let num = 1u64 << (15 + shift);
+        let mul = (num + span / 2) / span;
+        Some(Ramp {
+            start,
+            span: span as u32,
+            mul: mul.min(u32::MAX as u64) as u32,
+            shift: shift as u8,
+        })
+    }
+
+    /// Position of a distance `d = x - start` (already known non-negative) along the ramp.
+    #[inline]
+    fn along(&self, d: u32) -> u32 {
+        if d >= self.span {
+            return 1 << 15;
+        }
+        let t = (d as u64 * self.mul as u64) >> self.shift;
+        (t as u32).min(1 << 15)
+    }
+
+    /// Position of `x` along the ramp, Q15 in [0, 32768].
+    #[inline]
+    fn at(&self, x: i32) -> u32 {
+        let d = x as i64 - self.start as i64;
+        if d <= 0 {
+            0
+        } else {
+            self.along(d.min(u32::MAX as i64) as u32)
+        }
+    }
+}
+
+/// The S-function of a position `t` ∈ [0, 1] (Q15): 2t² below ½, 1 − 2(1−t)² above.
+#[inline]
+fn smooth(t: u32) -> u32 {
+    if t <= 1 << 14 {
+        (t * t + (1 << 13)) >> 14
+    } else {
+        let u = (1 << 15) - t;
+        (1 << 15) - ((u * u + (1 << 13)) >> 14)
+    }
+}
+
+/// A validated confidence distribution function, ready to evaluate.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Cdf(Shape);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Shape {
+    Rising(Ramp),
+    Falling(Ramp),
+    Bell { center: i32, ramp: Ramp },
+    FlatBell { rise: Ramp, fall: Ramp },
+    Above(i32),
+    Below(i32),
+}
+
+fn param(name: &'static str, value: f32) -> Result<i32, CdfError> {
+    if Signal::representable(value) {
+        Ok(Signal::from_f32(value).to_bits())
+    } else {
+        Err(CdfError::NotRepresentable { param: name, value })
+    }
+}
+
+fn ordered(
+    first: (&'static str, f32, i32),
+    second: (&'static str, f32, i32),
+) -> Result<Ramp, CdfError> {
+    let out_of_order = CdfError::OutOfOrder {
+        first: first.0,
+        first_value: first.1,
+        second: second.0,
+        second_value: second.1,
+    };
+    if first.1 >= second.1 {
+        return Err(out_of_order);
+    }
+    // Distinct as floats but equal once quantized: narrower than the feature resolution.
+    Ramp::new(first.2, second.2).ok_or(CdfError::TooNarrow {
+        param: second.0,
+        value: second.1 - first.1,
+    })
+}
+
+impl Cdf {
+    /// Validates a specification: every parameter finite and within ±32768, parameters in
+    /// order, widths at least the feature resolution.
+    pub fn new(spec: &CdfSpec) -> Result<Cdf, CdfError> {
+        let shape = match *spec {
+            CdfSpec::Sigmoid { low, high, falling } => {
+                let ramp = ordered(
+                    ("low", low, param("low", low)?),
+                    ("high", high, param("high", high)?),
+                )?;
+                if falling {
+                    Shape::Falling(ramp)
+                } else {
+                    Shape::Rising(ramp)
+                }
+            }
+            CdfSpec::Bell { center, half_width } => {
+                let c = param("center", center)?;
+                let w = param("half_width", half_width)?;
+                if half_width <= 0.0 || w <= 0 {
+                    return Err(CdfError::TooNarrow {
+                        param: "half_width",
+                        value: half_width,
+                    });
+                }
+                let ramp = Ramp::new(0, w).ok_or(CdfError::TooNarrow {
+                    param: "half_width",
+                    value: half_width,
+                })?;
+                Shape::Bell { center: c, ramp }
+            }
+            CdfSpec::FlatBell {
+                low,
+                plateau_low,
+                plateau_high,
+                high,
+            } => {
+                let a = ("low", low, param("low", low)?);
+                let b = (
+                    "plateau_low",
+                    plateau_low,
+                    param("plateau_low", plateau_low)?,
+                );
+                let c = (
+                    "plateau_high",
+                    plateau_high,
+                    param("plateau_high", plateau_high)?,
+                );
+                let d = ("high", high, param("high", high)?);
+                if plateau_low > plateau_high {
+                    return Err(CdfError::OutOfOrder {
+                        first: b.0,
+                        first_value: b.1,
+                        second: c.0,
+                        second_value: c.1,
+                    });
+                }
+                Shape::FlatBell {
+                    rise: ordered(a, b)?,
+                    fall: ordered(c, d)?,
+                }
+            }
+            CdfSpec::Binary { threshold, above } => {
+                let t = param("threshold", threshold)?;
+                if above {
+                    Shape::Above(t)
+                } else {
+                    Shape::Below(t)
+                }
+            }
+        };
+        Ok(Cdf(shape))
+    }
+
+    /// The confidence this function gives a feature value.
+    #[inline]
+    pub fn eval(&self, x: Signal) -> Confidence {
+        let x = x.to_bits();
+        let q = match self.0 {
+            Shape::Rising(r) => smooth(r.at(x)),
+            Shape::Falling(r) => (1 << 15) - smooth(r.at(x)),
+            Shape::Bell { center, ramp } => {
+                let d = (x as i64 - center as i64).unsigned_abs();
+                (1 << 15) - smooth(ramp.along(d.min(u32::MAX as u64) as u32))
+            }
+            Shape::FlatBell { rise, fall } => {
+                if x < fall.start {
+                    smooth(rise.at(x))
+                } else {
+                    (1 << 15) - smooth(fall.at(x))
+                }
+            }
+            Shape::Above(t) => u32::from(x >= t) << 15,
+            Shape::Below(t) => u32::from(x <= t) << 15,
+        };
+        Confidence::from_bits_clamped(q)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn eval(spec: CdfSpec, x: f32) -> f32 {
+        Cdf::new(&spec)
+            .expect("valid")
+            .eval(Signal::from_f32(x))
+            .to_f32()
+    }
+
+    #[test]
+    fn sigmoid_hits_its_anchor_points() {
+        let s = CdfSpec::Sigmoid {
+            low: 1.0,
+            high: 3.0,
+            falling: false,
+        };
+        assert_eq!(eval(s, 0.0), 0.0);
+        assert_eq!(eval(s, 1.0), 0.0);
+        assert_eq!(eval(s, 2.0), 0.5);
+        assert_eq!(eval(s, 3.0), 1.0);
+        assert_eq!(eval(s, 100.0), 1.0);
+        // 2t² at t = 1/4.
+        assert!((eval(s, 1.5) - 0.125).abs() < 1e-4);
+        let f = CdfSpec::Sigmoid {
+            low: 1.0,
+            high: 3.0,
+            falling: true,
+        };
+        assert_eq!(eval(f, 0.0), 1.0);
+        assert!((eval(f, 1.5) - 0.875).abs() < 1e-4);
+    }
+
+    #[test]
+    fn bell_and_flat_bell_are_symmetric_where_they_should_be() {
+        let b = CdfSpec::Bell {
+            center: -2.0,
+            half_width: 4.0,
+        };
+        assert_eq!(eval(b, -2.0), 1.0);
+        assert_eq!(eval(b, 0.0), 0.5);
+        assert_eq!(eval(b, -4.0), 0.5);
+        assert_eq!(eval(b, 2.0), 0.0);
+        assert_eq!(eval(b, -1000.0), 0.0);
+        let l = CdfSpec::FlatBell {
+            low: 0.0,
+            plateau_low: 1.0,
+            plateau_high: 2.0,
+            high: 4.0,
+        };
+        assert_eq!(eval(l, -1.0), 0.0);
+        assert_eq!(eval(l, 0.5), 0.5);
+        assert_eq!(eval(l, 1.5), 1.0);
+        assert_eq!(eval(l, 3.0), 0.5);
+        assert_eq!(eval(l, 5.0), 0.0);
+    }
+
+    #[test]
+    fn binary_is_inclusive_at_the_threshold() {
+        let a = CdfSpec::Binary {
+            threshold: 0.0,
+            above: true,
+        };
+        let b = CdfSpec::Binary {
+            threshold: 0.0,
+            above: false,
+        };
+        assert_eq!(
+            (eval(a, 0.0), eval(a, -1e-4), eval(a, 5.0)),
+            (1.0, 0.0, 1.0)
+        );
+        assert_eq!(
+            (eval(b, 0.0), eval(b, 1e-4), eval(b, -5.0)),
+            (1.0, 0.0, 1.0)
+        );
+    }
+
+    #[test]
+    fn extreme_spans_stay_in_range() {
+        let wide = CdfSpec::Sigmoid {
+            low: -32768.0,
+            high: 32767.0,
+            falling: false,
+        };
+        assert!((eval(wide, 0.0) - 0.5).abs() < 1e-4);
+        assert_eq!(eval(wide, 40000.0), 1.0);
+        let narrow = Cdf::new(&CdfSpec::Sigmoid {
+            low: 0.0,
+            high: 2.0 / 65536.0,
+            falling: false,
+        })
+        .expect("two steps wide");
+        assert_eq!(narrow.eval(Signal::from_bits(1)).to_f32(), 0.5);
+        assert_eq!(narrow.eval(Signal::MAX), Confidence::ONE);
+        assert_eq!(narrow.eval(Signal::MIN), Confidence::ZERO);
+    }
+
+    #[test]
+    fn bad_parameters_are_named() {
+        assert_eq!(
+            Cdf::new(&CdfSpec::Sigmoid {
+                low: 2.0,
+                high: 1.0,
+                falling: false
+            }),
+            Err(CdfError::OutOfOrder {
+                first: "low",
+                first_value: 2.0,
+                second: "high",
+                second_value: 1.0
+            })
+        );
+        assert_eq!(
+            Cdf::new(&CdfSpec::Bell {
+                center: f32::NAN,
+                half_width: 1.0
+            })
+            .map_err(|e| matches!(
+                e,
+                CdfError::NotRepresentable {
+                    param: "center",
+                    ..
+                }
+            )),
+            Err(true)
+        );
+        assert_eq!(
+            Cdf::new(&CdfSpec::Bell {
+                center: 0.0,
+                half_width: 0.0
+            }),
+            Err(CdfError::TooNarrow {
+                param: "half_width",
+                value: 0.0
+            })
+        );
+        assert_eq!(
+            Cdf::new(&CdfSpec::Binary {
+                threshold: f32::INFINITY,
+                above: true
+            }),
+            Err(CdfError::NotRepresentable {
+                param: "threshold",
+                value: f32::INFINITY
+            })
+        );
+        assert!(matches!(
+            Cdf::new(&CdfSpec::FlatBell {
+                low: 0.0,
+                plateau_low: 2.0,
+                plateau_high: 1.0,
+                high: 3.0
+            }),
+            Err(CdfError::OutOfOrder {
+                first: "plateau_low",
+                second: "plateau_high",
+                ..
+            })
+        ));
+        assert!(matches!(
+            Cdf::new(&CdfSpec::Sigmoid {
+                low: 0.0,
+                high: 1e-7,
+                falling: false
+            }),
+            Err(CdfError::TooNarrow { .. })
+        ));
+    }
+}

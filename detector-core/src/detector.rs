@@ -1,0 +1,732 @@
+//! The engine: a [`Detector`] (validated parameters, immutable) and its [`State`] (what
+//! changes every tick), kept apart so the same parameters can drive several states.
+//!
+//! A tick runs four stages, each public so a profiler can time them one by one:
+//! [`Detector::update_features`] → [`Detector::term_confidences`] →
+//! [`Detector::combine`] → [`Detector::decide`]; [`Detector::tick`] runs them in order.
+
+use heapless::Vec;
+
+use crate::cdf::Cdf;
+use crate::config::{Config, ConfigError, Item, LevelSpec, Name, Problem};
+use crate::feature::{STE_POOL, Stage, StageState};
+use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
+use crate::{MAX_CHANNELS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS};
+
+const MAX_SLOTS: usize = MAX_CHANNELS + MAX_FEATURES;
+
+/// The index of an event in its configuration, `0..MAX_EVENTS`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EventId(pub u8);
+
+/// A phase of a particular detector; only obtainable from it, so always valid for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PhaseId(u8);
+
+impl PhaseId {
+    /// The phase's index in the configuration.
+    pub const fn index(self) -> u8 {
+        self.0
+    }
+}
+
+/// A decision level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Level {
+    /// Early warning: the event may be happening.
+    Alert,
+    /// Confirmation: the controller may act on it.
+    Confirm,
+}
+
+impl Level {
+    /// The level's name as the tools and the CAN stream write it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Level::Alert => "alert",
+            Level::Confirm => "confirm",
+        }
+    }
+}
+
+/// A level raised for an event.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Decision {
+    /// Which event.
+    pub event: EventId,
+    /// Which level was raised.
+    pub level: Level,
+    /// The event's confidence at that tick.
+    pub confidence: Confidence,
+    /// Back-dated onset: the first tick of the current run of confidence above the
+    /// event's `onset_level` (by default, when the confidence last left zero).
+    pub onset: Tick,
+    /// The tick at which the level was raised.
+    pub tick: Tick,
+}
+
+/// One tick's inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Inputs {
+    /// Channel samples, in the configuration's channel order; entries past the channel
+    /// count are ignored.
+    pub samples: [Signal; MAX_CHANNELS],
+    /// Channels currently known bad (sensor fault, stale context): bit `i` for channel `i`.
+    pub faults: ChannelMask,
+}
+
+impl Default for Inputs {
+    fn default() -> Self {
+        Inputs {
+            samples: [Signal::ZERO; MAX_CHANNELS],
+            faults: 0,
+        }
+    }
+}
+
+/// One tick's results.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Output {
+    /// Each event's confidence, by [`EventId`]; zero for events not evaluated.
+    pub confidences: [Confidence; MAX_EVENTS],
+    /// The events of the active phase (the ones evaluated).
+    pub evaluated: EventMask,
+    /// Events of the phase that cannot be judged because a context feature, or every
+    /// sensor feature, reads a faulty channel: confidence 0, no decision.
+    pub unjudgeable: EventMask,
+    /// Events judged without some sensor terms, whose features read a faulty channel
+    /// (those terms count as 0, so the confidence can only be lower).
+    pub degraded: EventMask,
+    /// Events whose alert level is up after this tick.
+    pub alerting: EventMask,
+    /// Events whose confirm level is up after this tick.
+    pub confirmed: EventMask,
+    /// Levels raised at this tick, at most two per event.
+    pub decisions: Vec<Decision, { 2 * MAX_EVENTS }>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Term {
+    slot: u8,
+    cdf: Cdf,
+    /// Q15; 0 for context terms.
+    weight: u16,
+    channels: ChannelMask,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct LevelParams {
+    on: u16,
+    off: u16,
+    dwell: u16,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+struct Event {
+    context: Vec<Term, MAX_TERMS>,
+    sensor: Vec<Term, MAX_TERMS>,
+    levels: [LevelParams; 2],
+    onset_level: u16,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct LevelState {
+    up: bool,
+    run: u16,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct EventState {
+    rising: bool,
+    onset: Tick,
+    levels: [LevelState; 2],
+}
+
+/// Everything a detector changes as it runs. Fixed size, no allocation; see
+/// [`State::SIZE`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct State {
+    /// Channel samples then feature values, raw 16.16.
+    values: [i32; MAX_SLOTS],
+    stages: [StageState; MAX_FEATURES],
+    ring: [u32; STE_POOL],
+    /// Per event, context term confidences then sensor term confidences (Q15).
+    psi: [[u16; 2 * MAX_TERMS]; MAX_EVENTS],
+    events: [EventState; MAX_EVENTS],
+    phase: u8,
+}
+
+impl State {
+    /// The size of a detector's state in bytes.
+    pub const SIZE: usize = core::mem::size_of::<State>();
+
+    /// The current value of feature `index` (in configuration order).
+    pub fn feature(&self, index: usize) -> Option<Signal> {
+        let slot = MAX_CHANNELS
+            .checked_add(index)
+            .filter(|_| index < MAX_FEATURES)?;
+        self.values.get(slot).map(|&v| Signal::from_bits(v))
+    }
+
+    /// The term confidences computed for `event` at the last tick: (context terms, sensor
+    /// terms), in configuration order. Stale for events outside the active phase.
+    pub fn term_confidences(
+        &self,
+        detector: &Detector,
+        event: EventId,
+    ) -> Option<(TermConfidences, TermConfidences)> {
+        let e = detector.events.get(usize::from(event.0))?;
+        let psi = self.psi.get(usize::from(event.0))?;
+        let (ctx, sen) = psi.split_at(MAX_TERMS);
+        Some((
+            TermConfidences(ctx.get(..e.context.len())?.try_into().ok()?),
+            TermConfidences(sen.get(..e.sensor.len())?.try_into().ok()?),
+        ))
+    }
+
+    /// The active phase.
+    pub fn phase(&self) -> PhaseId {
+        PhaseId(self.phase)
+    }
+}
+
+/// The confidences of an event's terms of one kind, in configuration order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TermConfidences(Vec<u16, MAX_TERMS>);
+
+impl TermConfidences {
+    /// The confidences.
+    pub fn iter(&self) -> impl Iterator<Item = Confidence> + '_ {
+        self.0
+            .iter()
+            .map(|&b| Confidence::from_bits_clamped(u32::from(b)))
+    }
+}
+
+/// A validated detector: compiled features, events, phases and decision levels.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Detector {
+    rate_hz: f32,
+    channel_names: Vec<Name, MAX_CHANNELS>,
+    feature_names: Vec<Name, MAX_FEATURES>,
+    event_names: Vec<Name, MAX_EVENTS>,
+    phase_names: Vec<Name, MAX_PHASES>,
+    stages: Vec<Stage, MAX_FEATURES>,
+    /// Channel dependencies of each slot.
+    slot_channels: [ChannelMask; MAX_SLOTS],
+    weights: [u32; STE_POOL],
+    events: Vec<Event, MAX_EVENTS>,
+    phases: Vec<EventMask, MAX_PHASES>,
+}
+
+fn err<T>(item: Item, problem: Problem) -> Result<T, ConfigError> {
+    Err(ConfigError { item, problem })
+}
+
+/// Checks names are non-empty and distinct.
+fn unique<'a>(
+    names: impl Iterator<Item = &'a Name> + Clone,
+    item: fn(Name) -> Item,
+) -> Result<(), ConfigError> {
+    for (i, n) in names.clone().enumerate() {
+        if n.is_empty() {
+            return err(item(n.clone()), Problem::EmptyName);
+        }
+        if names.clone().take(i).any(|m| m == n) {
+            return err(item(n.clone()), Problem::Duplicate);
+        }
+    }
+    Ok(())
+}
+
+fn confidence_param(
+    item: &Item,
+    param: &'static str,
+    value: f32,
+    rule: &'static str,
+) -> Result<u16, ConfigError> {
+    match Confidence::from_f32(value) {
+        Some(c) => Ok(c.to_bits()),
+        None => err(item.clone(), Problem::Level { param, value, rule }),
+    }
+}
+
+fn level(
+    event: &Name,
+    name: &'static str,
+    spec: &LevelSpec,
+    rate_hz: f32,
+) -> Result<LevelParams, ConfigError> {
+    let item = Item::Level(event.clone(), name);
+    let on = confidence_param(&item, "on", spec.on, "must be within (0, 1]")?;
+    if on == 0 {
+        return err(
+            item,
+            Problem::Level {
+                param: "on",
+                value: spec.on,
+                rule: "must be within (0, 1]",
+            },
+        );
+    }
+    let off = confidence_param(&item, "off", spec.off, "must be within [0, on]")?;
+    if off > on {
+        return err(
+            item,
+            Problem::Level {
+                param: "off",
+                value: spec.off,
+                rule: "must be within [0, on]",
+            },
+        );
+    }
+    let ticks = spec.dwell_ms * rate_hz / 1000.0;
+    if !(ticks.is_finite() && ticks >= 0.0 && ticks <= 65535.0) {
+        return err(item, Problem::Dwell(spec.dwell_ms));
+    }
+    Ok(LevelParams {
+        on,
+        off,
+        dwell: ((ticks + 0.5) as u16).max(1),
+    })
+}
+
+impl Detector {
+    /// Validates a configuration and compiles it. Every rule is checked; the first
+    /// violation is returned, naming the item and the value.
+    pub fn build(config: &Config) -> Result<Detector, ConfigError> {
+        let rate_hz = config.rate_hz;
+        if !(rate_hz.is_finite() && (10.0..=50_000.0).contains(&rate_hz)) {
+            return err(Item::Config, Problem::Rate(rate_hz));
+        }
+        if config.channels.is_empty() {
+            return err(Item::Config, Problem::Empty("channel"));
+        }
+        if config.events.is_empty() {
+            return err(Item::Config, Problem::Empty("event"));
+        }
+        if config.phases.is_empty() {
+            return err(Item::Config, Problem::Empty("phase"));
+        }
+        let channel_names: Vec<Name, MAX_CHANNELS> =
+            config.channels.iter().map(|c| c.name.clone()).collect();
+        unique(channel_names.iter(), Item::Channel)?;
+        let feature_names: Vec<Name, MAX_FEATURES> =
+            config.features.iter().map(|f| f.name.clone()).collect();
+        unique(feature_names.iter(), Item::Feature)?;
+        for f in &feature_names {
+            if channel_names.contains(f) {
+                return err(Item::Feature(f.clone()), Problem::Duplicate);
+            }
+        }
+        let event_names: Vec<Name, MAX_EVENTS> =
+            config.events.iter().map(|e| e.name.clone()).collect();
+        unique(event_names.iter(), Item::Event)?;
+        let phase_names: Vec<Name, MAX_PHASES> =
+            config.phases.iter().map(|p| p.name.clone()).collect();
+        unique(phase_names.iter(), Item::Phase)?;
+
+        let mut slot_channels = [0 as ChannelMask; MAX_SLOTS];
+        for (i, mask) in slot_channels
+            .iter_mut()
+            .take(channel_names.len())
+            .enumerate()
+        {
+            *mask = 1 << i;
+        }
+        let mut stages = Vec::new();
+        let mut weights = [0u32; STE_POOL];
+        let mut pool_used = 0;
+        for (k, f) in config.features.iter().enumerate() {
+            let item = || Item::Feature(f.name.clone());
+            let mut deps: ChannelMask = 0;
+            let resolved = f.stage.map_inputs(|name| {
+                let slot = channel_names.iter().position(|c| c == name).or_else(|| {
+                    feature_names
+                        .iter()
+                        .take(k)
+                        .position(|g| g == name)
+                        .map(|j| MAX_CHANNELS + j)
+                });
+                match slot {
+                    Some(s) => {
+                        deps |= slot_channels.get(s).copied().unwrap_or(0);
+                        Ok(s as u8)
+                    }
+                    None => err(item(), Problem::UnknownInput(name.clone())),
+                }
+            })?;
+            let stage = Stage::compile(&resolved, rate_hz, &mut pool_used, &mut weights)
+                .or_else(|e| err(item(), Problem::Stage(e)))?;
+            if let Some(m) = slot_channels.get_mut(MAX_CHANNELS + k) {
+                *m = deps;
+            }
+            // Capacity matches the feature list's, so this cannot fail.
+            let _ = stages.push(stage);
+        }
+
+        let feature_slot = |event: &Name, feature: &Name, item: Item| -> Result<u8, ConfigError> {
+            let _ = event;
+            match feature_names.iter().position(|g| g == feature) {
+                Some(j) => Ok((MAX_CHANNELS + j) as u8),
+                None => err(item, Problem::UnknownFeature(feature.clone())),
+            }
+        };
+        let mut events = Vec::new();
+        for e in &config.events {
+            if e.sensor.is_empty() {
+                return err(Item::Event(e.name.clone()), Problem::Empty("sensor term"));
+            }
+            let mut context = Vec::new();
+            for t in &e.context {
+                let item = || Item::ContextTerm(e.name.clone(), t.feature.clone());
+                let slot = feature_slot(&e.name, &t.feature, item())?;
+                let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
+                let channels = slot_channels.get(usize::from(slot)).copied().unwrap_or(0);
+                let _ = context.push(Term {
+                    slot,
+                    cdf,
+                    weight: 0,
+                    channels,
+                });
+            }
+            let mut sensor = Vec::new();
+            let mut total = 0.0f32;
+            let mut total_q15 = 0u32;
+            for t in &e.sensor {
+                let item = || Item::SensorTerm(e.name.clone(), t.feature.clone());
+                let slot = feature_slot(&e.name, &t.feature, item())?;
+                let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
+                let Some(weight) = Confidence::from_f32(t.weight) else {
+                    return err(item(), Problem::Weight(t.weight));
+                };
+                total += t.weight;
+                total_q15 += u32::from(weight.to_bits());
+                let channels = slot_channels.get(usize::from(slot)).copied().unwrap_or(0);
+                let _ = sensor.push(Term {
+                    slot,
+                    cdf,
+                    weight: weight.to_bits(),
+                    channels,
+                });
+            }
+            // A little float slack so that weights like 0.1 + 0.2 + 0.7 pass; the
+            // quantized sum must still not exceed one.
+            if total > 1.0 + 1e-5 || total_q15 > u32::from(Confidence::ONE.to_bits()) + 2 {
+                return err(Item::Event(e.name.clone()), Problem::WeightSum(total));
+            }
+            let alert = level(&e.name, "alert", &e.alert, rate_hz)?;
+            let confirm = level(&e.name, "confirm", &e.confirm, rate_hz)?;
+            if confirm.on < alert.on {
+                return err(
+                    Item::Level(e.name.clone(), "confirm"),
+                    Problem::Level {
+                        param: "on",
+                        value: e.confirm.on,
+                        rule: "must be at least the alert level's on",
+                    },
+                );
+            }
+            let onset_rule = "must be within [0, alert on)";
+            let onset_level = confidence_param(
+                &Item::Event(e.name.clone()),
+                "onset_level",
+                e.onset_level,
+                onset_rule,
+            )?;
+            if onset_level >= alert.on {
+                return err(
+                    Item::Event(e.name.clone()),
+                    Problem::Level {
+                        param: "onset_level",
+                        value: e.onset_level,
+                        rule: onset_rule,
+                    },
+                );
+            }
+            let _ = events.push(Event {
+                context,
+                sensor,
+                levels: [alert, confirm],
+                onset_level,
+            });
+        }
+
+        let mut phases = Vec::new();
+        for p in &config.phases {
+            let mut mask: EventMask = 0;
+            for name in &p.events {
+                let Some(i) = event_names.iter().position(|n| n == name) else {
+                    return err(
+                        Item::Phase(p.name.clone()),
+                        Problem::UnknownEvent(name.clone()),
+                    );
+                };
+                if mask & (1 << i) != 0 {
+                    return err(
+                        Item::Phase(p.name.clone()),
+                        Problem::RepeatedEvent(name.clone()),
+                    );
+                }
+                mask |= 1 << i;
+            }
+            let _ = phases.push(mask);
+        }
+
+        Ok(Detector {
+            rate_hz,
+            channel_names,
+            feature_names,
+            event_names,
+            phase_names,
+            stages,
+            slot_channels,
+            weights,
+            events,
+            phases,
+        })
+    }
+
+    /// A fresh state: features empty, first phase active, no level up.
+    pub fn new_state(&self) -> State {
+        State {
+            values: [0; MAX_SLOTS],
+            stages: [StageState::default(); MAX_FEATURES],
+            ring: [0; STE_POOL],
+            psi: [[0; 2 * MAX_TERMS]; MAX_EVENTS],
+            events: [EventState::default(); MAX_EVENTS],
+            phase: 0,
+        }
+    }
+
+    /// The detector rate in Hz.
+    pub fn rate_hz(&self) -> f32 {
+        self.rate_hz
+    }
+
+    /// Channel names, in sample order.
+    pub fn channels(&self) -> &[Name] {
+        &self.channel_names
+    }
+
+    /// Feature names, in evaluation order.
+    pub fn features(&self) -> &[Name] {
+        &self.feature_names
+    }
+
+    /// Event names, by [`EventId`].
+    pub fn events(&self) -> &[Name] {
+        &self.event_names
+    }
+
+    /// Phase names, by index.
+    pub fn phases(&self) -> &[Name] {
+        &self.phase_names
+    }
+
+    /// The index of a channel by name.
+    pub fn channel(&self, name: &str) -> Option<usize> {
+        self.channel_names.iter().position(|n| n == name)
+    }
+
+    /// An event by name.
+    pub fn event(&self, name: &str) -> Option<EventId> {
+        self.event_names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| EventId(i as u8))
+    }
+
+    /// A phase by name.
+    pub fn phase(&self, name: &str) -> Option<PhaseId> {
+        self.phase_names
+            .iter()
+            .position(|n| n == name)
+            .map(|i| PhaseId(i as u8))
+    }
+
+    /// A phase by index, `None` if this detector has no such phase.
+    pub fn phase_at(&self, index: u8) -> Option<PhaseId> {
+        (usize::from(index) < self.phases.len()).then_some(PhaseId(index))
+    }
+
+    /// The events possible in a phase.
+    pub fn phase_events(&self, phase: PhaseId) -> EventMask {
+        self.phases.get(usize::from(phase.0)).copied().unwrap_or(0)
+    }
+
+    /// The channels an event's features read (context and sensor terms together).
+    pub fn event_channels(&self, event: EventId) -> ChannelMask {
+        self.events.get(usize::from(event.0)).map_or(0, |e| {
+            e.context
+                .iter()
+                .chain(&e.sensor)
+                .fold(0, |m, t| m | t.channels)
+        })
+    }
+
+    /// Switches phase. Switching to another phase lowers every level and forgets onsets;
+    /// features keep running, so they are warm in the new phase.
+    pub fn set_phase(&self, state: &mut State, phase: PhaseId) {
+        if state.phase != phase.0 {
+            state.phase = phase.0;
+            state.events = [EventState::default(); MAX_EVENTS];
+        }
+    }
+
+    /// One whole tick: features, term confidences, event confidences, decisions.
+    pub fn tick(&self, state: &mut State, now: Tick, inputs: &Inputs) -> Output {
+        let mut out = Output::default();
+        self.update_features(state, inputs);
+        self.term_confidences(state, inputs.faults, &mut out);
+        self.combine(state, &mut out);
+        self.decide(state, now, &mut out);
+        out
+    }
+
+    /// Stage 1: stores the samples and updates every feature, in order. Features run in
+    /// every phase so they are warm when the phase changes.
+    pub fn update_features(&self, state: &mut State, inputs: &Inputs) {
+        let n = self.channel_names.len();
+        for (v, s) in state.values.iter_mut().zip(inputs.samples.iter()).take(n) {
+            *v = s.to_bits();
+        }
+        for (k, (stage, st)) in self.stages.iter().zip(state.stages.iter_mut()).enumerate() {
+            let y = stage.update(st, &state.values, &mut state.ring, &self.weights);
+            if let Some(v) = state.values.get_mut(MAX_CHANNELS + k) {
+                *v = y;
+            }
+        }
+    }
+
+    /// Stage 2: the confidence of every term of the active phase's events; terms reading a
+    /// faulty channel get 0. Sets `evaluated`, `unjudgeable` and `degraded` in `out`.
+    pub fn term_confidences(&self, state: &mut State, faults: ChannelMask, out: &mut Output) {
+        let active = self.phase_events(PhaseId(state.phase));
+        out.evaluated = active;
+        for (i, (e, psi)) in self.events.iter().zip(state.psi.iter_mut()).enumerate() {
+            let bit: EventMask = 1 << i;
+            if active & bit == 0 {
+                continue;
+            }
+            let (ctx, sen) = psi.split_at_mut(MAX_TERMS);
+            let mut sensor_ok = false;
+            for (t, p) in e.context.iter().zip(ctx.iter_mut()) {
+                *p = eval(t, &state.values, faults);
+                if t.channels & faults != 0 {
+                    out.unjudgeable |= bit;
+                }
+            }
+            for (t, p) in e.sensor.iter().zip(sen.iter_mut()) {
+                *p = eval(t, &state.values, faults);
+                if t.channels & faults != 0 {
+                    out.degraded |= bit;
+                } else {
+                    sensor_ok = true;
+                }
+            }
+            if !sensor_ok {
+                out.unjudgeable |= bit;
+            }
+        }
+        out.degraded &= !out.unjudgeable;
+    }
+
+    /// Stage 3: eq. 14 for every judgeable event of the active phase, from the term
+    /// confidences: Π context × min(1, Σ weight × sensor), rounded to nearest in Q15.
+    pub fn combine(&self, state: &State, out: &mut Output) {
+        let judged = out.evaluated & !out.unjudgeable;
+        for (i, ((e, psi), c)) in self
+            .events
+            .iter()
+            .zip(state.psi.iter())
+            .zip(out.confidences.iter_mut())
+            .enumerate()
+        {
+            if judged & (1 << i) == 0 {
+                continue;
+            }
+            let (ctx, sen) = psi.split_at(MAX_TERMS);
+            let product = ctx
+                .iter()
+                .take(e.context.len())
+                .fold(Confidence::ONE, |acc, &p| {
+                    acc.mul(Confidence::from_bits_clamped(u32::from(p)))
+                });
+            let sum: u32 = e
+                .sensor
+                .iter()
+                .zip(sen)
+                .map(|(t, &p)| u32::from(t.weight) * u32::from(p))
+                .sum();
+            let sum = Confidence::from_bits_clamped((sum + (1 << 14)) >> 15);
+            *c = product.mul(sum);
+        }
+    }
+
+    /// Stage 4: decision levels with hysteresis and dwell, and onset tracking, for the
+    /// active phase's events. An unjudgeable event has every level lowered.
+    pub fn decide(&self, state: &mut State, now: Tick, out: &mut Output) {
+        for (i, (e, st)) in self.events.iter().zip(state.events.iter_mut()).enumerate() {
+            let bit: EventMask = 1 << i;
+            if out.evaluated & bit == 0 {
+                continue;
+            }
+            if out.unjudgeable & bit != 0 {
+                *st = EventState::default();
+                continue;
+            }
+            let c = out.confidences.get(i).copied().unwrap_or_default();
+            if c.to_bits() > e.onset_level {
+                if !st.rising {
+                    st.rising = true;
+                    st.onset = now;
+                }
+            } else {
+                st.rising = false;
+            }
+            for (k, (p, ls)) in e.levels.iter().zip(st.levels.iter_mut()).enumerate() {
+                let level = if k == 0 { Level::Alert } else { Level::Confirm };
+                if ls.up {
+                    if c.to_bits() < p.off {
+                        *ls = LevelState::default();
+                    }
+                } else if c.to_bits() >= p.on {
+                    ls.run = ls.run.saturating_add(1);
+                    if ls.run >= p.dwell {
+                        ls.up = true;
+                        // Capacity is two per event, so this cannot fail.
+                        let _ = out.decisions.push(Decision {
+                            event: EventId(i as u8),
+                            level,
+                            confidence: c,
+                            onset: st.onset,
+                            tick: now,
+                        });
+                    }
+                } else {
+                    ls.run = 0;
+                }
+                if ls.up {
+                    match level {
+                        Level::Alert => out.alerting |= bit,
+                        Level::Confirm => out.confirmed |= bit,
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline]
+fn eval(t: &Term, values: &[i32; MAX_SLOTS], faults: ChannelMask) -> u16 {
+    if t.channels & faults != 0 {
+        return 0;
+    }
+    let x = values.get(usize::from(t.slot)).copied().unwrap_or(0);
+    t.cdf.eval(Signal::from_bits(x)).to_bits()
+}

@@ -1,0 +1,667 @@
+//! Features: small stateful stages, each fed once per tick, turning channel samples (or
+//! other features) into the numbers the confidence functions judge.
+//!
+//! A feature reads *slots*: the input channels come first, then the features in their
+//! declaration order, so a feature can build on any channel or any earlier feature
+//! (a low-pass of a derivative, the STE of a difference, ...). All arithmetic is integer,
+//! saturating at the [`Signal`] range, with no division.
+
+use crate::MAX_STE_WINDOW;
+
+/// A window shape for the short-time energy.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(rename_all = "snake_case"))]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Window {
+    /// Every sample of the window weighs the same: h(m) = 1/N.
+    Rectangular,
+    /// Symmetric triangle (Bartlett without zero end points):
+    /// h(m) ∝ 1 − |2m − (N − 1)| / (N + 1), normalized to sum 1.
+    Triangular,
+}
+
+/// How a feature is computed, as a user describes it. Inputs name a channel or an earlier
+/// feature.
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(
+    feature = "serde",
+    serde(rename_all = "snake_case", deny_unknown_fields)
+)]
+pub enum StageSpec<N> {
+    /// The input as it is.
+    Raw {
+        /// Source channel or feature.
+        input: N,
+    },
+    /// |input|.
+    Abs {
+        /// Source channel or feature.
+        input: N,
+    },
+    /// First-order low-pass, backward-Euler discretization:
+    /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c).
+    LowPass {
+        /// Source channel or feature.
+        input: N,
+        /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
+        cutoff_hz: f32,
+    },
+    /// Rate of change: (x_n − x_{n−1}) · f_s, in the input's unit per second. Zero on the
+    /// first tick.
+    Rate {
+        /// Source channel or feature.
+        input: N,
+    },
+    /// a − b.
+    Difference {
+        /// Minuend.
+        a: N,
+        /// Subtrahend.
+        b: N,
+    },
+    /// Dot product of two 2-vectors: a_x b_x + a_y b_y (e.g. force · desired velocity, in W).
+    Dot {
+        /// The first vector's x and y.
+        a: [N; 2],
+        /// The second vector's x and y.
+        b: [N; 2],
+    },
+    /// Euclidean magnitude of a 2-vector, √(x² + y²).
+    Magnitude {
+        /// The vector's x and y.
+        of: [N; 2],
+    },
+    /// Short-time energy (the paper's eq. 17): ζ_n = Σ_{m=0}^{N−1} x²(n−m) h(m), with the
+    /// window h normalized to sum 1, so ζ is a mean square in the input's unit squared
+    /// whatever N. Until N samples have arrived the missing ones count as zero.
+    Ste {
+        /// Source channel or feature.
+        input: N,
+        /// Window length N, 1..=[`MAX_STE_WINDOW`] samples.
+        window: u16,
+        /// Window shape.
+        #[cfg_attr(feature = "serde", serde(default = "default_window"))]
+        shape: Window,
+    },
+}
+
+#[cfg(feature = "serde")]
+fn default_window() -> Window {
+    Window::Rectangular
+}
+
+impl<N> StageSpec<N> {
+    /// The same stage with every input name mapped through `f` (used to resolve names to
+    /// slots), stopping at the first error.
+    pub fn map_inputs<M, E>(
+        &self,
+        mut f: impl FnMut(&N) -> Result<M, E>,
+    ) -> Result<StageSpec<M>, E> {
+        Ok(match self {
+            StageSpec::Raw { input } => StageSpec::Raw { input: f(input)? },
+            StageSpec::Abs { input } => StageSpec::Abs { input: f(input)? },
+            StageSpec::LowPass { input, cutoff_hz } => StageSpec::LowPass {
+                input: f(input)?,
+                cutoff_hz: *cutoff_hz,
+            },
+            StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
+            StageSpec::Difference { a, b } => StageSpec::Difference { a: f(a)?, b: f(b)? },
+            StageSpec::Dot { a, b } => StageSpec::Dot {
+                a: [f(&a[0])?, f(&a[1])?],
+                b: [f(&b[0])?, f(&b[1])?],
+            },
+            StageSpec::Magnitude { of } => StageSpec::Magnitude {
+                of: [f(&of[0])?, f(&of[1])?],
+            },
+            StageSpec::Ste {
+                input,
+                window,
+                shape,
+            } => StageSpec::Ste {
+                input: f(input)?,
+                window: *window,
+                shape: *shape,
+            },
+        })
+    }
+
+    /// The stage's kind as written in a configuration file.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            StageSpec::Raw { .. } => "raw",
+            StageSpec::Abs { .. } => "abs",
+            StageSpec::LowPass { .. } => "low_pass",
+            StageSpec::Rate { .. } => "rate",
+            StageSpec::Difference { .. } => "difference",
+            StageSpec::Dot { .. } => "dot",
+            StageSpec::Magnitude { .. } => "magnitude",
+            StageSpec::Ste { .. } => "ste",
+        }
+    }
+}
+
+/// Why a feature's parameters were rejected.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum StageError {
+    /// The low-pass cut-off is not finite, not positive, or not below half the detector rate.
+    Cutoff {
+        /// The cut-off in Hz.
+        cutoff_hz: f32,
+        /// Half the detector rate, in Hz.
+        nyquist_hz: f32,
+    },
+    /// The STE window is empty or longer than [`MAX_STE_WINDOW`].
+    WindowLength {
+        /// The requested length.
+        window: u16,
+    },
+    /// The STE windows of all features together need more history than the detector holds.
+    WindowPool {
+        /// Samples needed so far, this feature included.
+        needed: usize,
+    },
+}
+
+impl core::fmt::Display for StageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            StageError::Cutoff {
+                cutoff_hz,
+                nyquist_hz,
+            } => write!(
+                f,
+                "cutoff_hz = {cutoff_hz} must be above 0 and below half the detector rate ({nyquist_hz} Hz)"
+            ),
+            StageError::WindowLength { window } => write!(
+                f,
+                "window = {window} must be between 1 and {MAX_STE_WINDOW} samples"
+            ),
+            StageError::WindowPool { needed } => write!(
+                f,
+                "the STE windows together need {needed} samples of history, more than the {STE_POOL} the detector holds"
+            ),
+        }
+    }
+}
+
+/// Samples of STE history the detector holds for all its STE features together.
+pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
+
+/// A compiled stage: input slots and precomputed coefficients.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Stage {
+    Raw(u8),
+    Abs(u8),
+    /// `alpha` is α in Q31.
+    LowPass {
+        input: u8,
+        alpha: u32,
+    },
+    /// `rate` is the detector rate in Hz, Q8.
+    Rate {
+        input: u8,
+        rate: u32,
+    },
+    Difference(u8, u8),
+    Dot([u8; 4]),
+    Magnitude(u8, u8),
+    /// History `ring[offset..offset + len]`; rectangular windows keep a running sum and
+    /// scale by `recip` = 2²⁴/N, tapered ones use `weights[offset..offset + len]` (Q24).
+    Ste {
+        input: u8,
+        offset: u16,
+        len: u16,
+        recip: u32,
+        tapered: bool,
+    },
+}
+
+/// Per-feature running state.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct StageState {
+    /// Low-pass output in Q32, or the STE running sum of squares (Q16).
+    acc: i64,
+    /// The previous input (rate).
+    prev: i32,
+    /// Next STE history position to overwrite, relative to the feature's offset.
+    pos: u16,
+    /// Whether the stage has seen a sample.
+    primed: bool,
+}
+
+impl Stage {
+    /// Compiles a stage whose inputs are already resolved to slots. `pool_used` is the STE
+    /// history taken by earlier features and grows by this feature's window; tapered
+    /// window weights are written into `weights`.
+    pub(crate) fn compile(
+        spec: &StageSpec<u8>,
+        rate_hz: f32,
+        pool_used: &mut usize,
+        weights: &mut [u32; STE_POOL],
+    ) -> Result<Stage, StageError> {
+        Ok(match *spec {
+            StageSpec::Raw { input } => Stage::Raw(input),
+            StageSpec::Abs { input } => Stage::Abs(input),
+            StageSpec::LowPass { input, cutoff_hz } => {
+                let nyquist_hz = rate_hz / 2.0;
+                if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < nyquist_hz) {
+                    return Err(StageError::Cutoff {
+                        cutoff_hz,
+                        nyquist_hz,
+                    });
+                }
+                // α = Δt / (τ + Δt) = 1 / (1 + f_s / (2π f_c)), in (0, 1).
+                let alpha = 1.0 / (1.0 + rate_hz / (2.0 * core::f32::consts::PI * cutoff_hz));
+                let alpha = (alpha as f64 * (1u64 << 31) as f64 + 0.5) as u64;
+                Stage::LowPass {
+                    input,
+                    alpha: alpha.clamp(1, (1 << 31) - 1) as u32,
+                }
+            }
+            StageSpec::Rate { input } => Stage::Rate {
+                input,
+                rate: (rate_hz * 256.0 + 0.5) as u32,
+            },
+            StageSpec::Difference { a, b } => Stage::Difference(a, b),
+            StageSpec::Dot { a, b } => Stage::Dot([a[0], a[1], b[0], b[1]]),
+            StageSpec::Magnitude { of } => Stage::Magnitude(of[0], of[1]),
+            StageSpec::Ste {
+                input,
+                window,
+                shape,
+            } => {
+                let n = usize::from(window);
+                if n == 0 || n > MAX_STE_WINDOW {
+                    return Err(StageError::WindowLength { window });
+                }
+                let offset = *pool_used;
+                let needed = offset + n;
+                let Some(taps) = weights.get_mut(offset..needed) else {
+                    return Err(StageError::WindowPool { needed });
+                };
+                *pool_used = needed;
+                let tapered = match shape {
+                    Window::Rectangular => false,
+                    Window::Triangular => {
+                        triangular(taps);
+                        true
+                    }
+                };
+                Stage::Ste {
+                    input,
+                    offset: offset as u16,
+                    len: window,
+                    recip: (((1u64 << 24) + n as u64 / 2) / n as u64) as u32,
+                    tapered,
+                }
+            }
+        })
+    }
+
+    /// Feeds one tick: reads input slots from `values`, returns the feature's new value.
+    /// `ring` is the detector's STE history, `weights` its tapered window taps.
+    #[inline]
+    pub(crate) fn update(
+        &self,
+        st: &mut StageState,
+        values: &[i32],
+        ring: &mut [u32; STE_POOL],
+        weights: &[u32; STE_POOL],
+    ) -> i32 {
+        let get = |slot: u8| values.get(usize::from(slot)).copied().unwrap_or(0);
+        match *self {
+            Stage::Raw(i) => get(i),
+            Stage::Abs(i) => get(i).saturating_abs(),
+            Stage::LowPass { input, alpha } => {
+                let x = get(input);
+                if !st.primed {
+                    st.primed = true;
+                    st.acc = i64::from(x) << 16;
+                } else {
+                    let diff =
+                        (i64::from(x) - (st.acc >> 16)).clamp(i32::MIN.into(), i32::MAX.into());
+                    st.acc += (diff * i64::from(alpha)) >> 15;
+                }
+                sat32(st.acc >> 16)
+            }
+            Stage::Rate { input, rate } => {
+                let x = get(input);
+                let out = if st.primed {
+                    let d =
+                        (i64::from(x) - i64::from(st.prev)).clamp(i32::MIN.into(), i32::MAX.into());
+                    sat32((d * i64::from(rate)) >> 8)
+                } else {
+                    0
+                };
+                st.primed = true;
+                st.prev = x;
+                out
+            }
+            Stage::Difference(a, b) => get(a).saturating_sub(get(b)),
+            Stage::Dot([ax, ay, bx, by]) => {
+                let p = i64::from(get(ax)) * i64::from(get(bx));
+                let q = i64::from(get(ay)) * i64::from(get(by));
+                sat32(p.saturating_add(q) >> 16)
+            }
+            Stage::Magnitude(x, y) => {
+                let (x, y) = (i64::from(get(x)), i64::from(get(y)));
+                let s = (x * x) as u64 + (y * y) as u64;
+                isqrt64(s).min(i32::MAX as u32) as i32
+            }
+            Stage::Ste {
+                input,
+                offset,
+                len,
+                recip,
+                tapered,
+            } => {
+                let x = i64::from(get(input));
+                let sq = ((x * x) >> 16).min(u32::MAX.into()) as u32;
+                let start = usize::from(offset);
+                let n = usize::from(len);
+                let (Some(hist), Some(taps)) = (
+                    ring.get_mut(start..start + n),
+                    weights.get(start..start + n),
+                ) else {
+                    return 0;
+                };
+                let newest = usize::from(st.pos);
+                let Some(slot) = hist.get_mut(newest) else {
+                    return 0;
+                };
+                let oldest = core::mem::replace(slot, sq);
+                st.pos = if newest + 1 >= n {
+                    0
+                } else {
+                    (newest + 1) as u16
+                };
+                if tapered {
+                    // Lag m pairs with taps[m]: lags 0..=newest run back from `newest`, the
+                    // remaining lags run back from the end of the ring.
+                    let (recent, older) = hist.split_at(newest + 1);
+                    let (near, far) = taps.split_at(newest + 1);
+                    let acc: u64 = recent
+                        .iter()
+                        .rev()
+                        .zip(near)
+                        .chain(older.iter().rev().zip(far))
+                        .map(|(&s, &w)| u64::from(s) * u64::from(w))
+                        .sum();
+                    (acc >> 24).min(i32::MAX as u64) as i32
+                } else {
+                    st.acc += i64::from(sq) - i64::from(oldest);
+                    let sum = st.acc.max(0) as u64;
+                    ((sum * u64::from(recip)) >> 24).min(i32::MAX as u64) as i32
+                }
+            }
+        }
+    }
+}
+
+/// Saturates to the `i32` range.
+#[inline]
+fn sat32(v: i64) -> i32 {
+    v.clamp(i32::MIN.into(), i32::MAX.into()) as i32
+}
+
+/// Fills `taps` with a symmetric triangular window in Q24 summing to exactly 2²⁴.
+fn triangular(taps: &mut [u32]) {
+    let n = taps.len() as u64;
+    // Unnormalized h(m) = (N + 1) − |2m − (N − 1)|, all positive.
+    let raw = |m: u64| (n + 1) - (2 * m).abs_diff(n - 1);
+    let total: u64 = (0..n).map(raw).sum();
+    let mut given = 0u64;
+    for (m, tap) in taps.iter_mut().enumerate() {
+        let w = (raw(m as u64) << 24) / total;
+        *tap = w as u32;
+        given += w;
+    }
+    // Rounding leaves a few units short of 2^24: give them to the centre tap.
+    if let Some(centre) = taps.get_mut((n / 2) as usize) {
+        *centre += ((1u64 << 24) - given) as u32;
+    }
+}
+
+/// ⌊√n⌋ for a 32-bit `n`, by Newton's method from a power of two above the root; uses only
+/// 32-bit division, which the Cortex-M4 does in hardware.
+#[inline]
+fn isqrt32(n: u32) -> u32 {
+    if n == 0 {
+        return 0;
+    }
+    let bits = 32 - n.leading_zeros();
+    let mut x = 1u32 << bits.div_ceil(2);
+    // Converges in at most 6 steps from this start; the bound only guards the loop.
+    for _ in 0..8 {
+        let y = (x + n / x) / 2;
+        if y >= x {
+            break;
+        }
+        x = y;
+    }
+    x
+}
+
+/// √n for a 64-bit `n`, within a relative 2⁻¹⁵ of ⌊√n⌋ (exact below 2³²): the top 32 bits
+/// (shifted by an even count) go through [`isqrt32`].
+#[inline]
+pub(crate) fn isqrt64(n: u64) -> u32 {
+    let bits = 64 - n.leading_zeros();
+    if bits <= 32 {
+        return isqrt32(n as u32);
+    }
+    let shift = (bits - 32).next_multiple_of(2);
+    isqrt32((n >> shift) as u32) << (shift / 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::num::Signal;
+
+    fn run(spec: StageSpec<u8>, inputs: &[&[f64]]) -> Vec<f64> {
+        let mut weights = [0u32; STE_POOL];
+        let mut used = 0;
+        let stage = Stage::compile(&spec, 1000.0, &mut used, &mut weights).expect("valid stage");
+        let mut st = StageState::default();
+        let mut ring = [0u32; STE_POOL];
+        (0..inputs[0].len())
+            .map(|k| {
+                let values: Vec<i32> = inputs
+                    .iter()
+                    .map(|c| Signal::from_f64(c[k]).to_bits())
+                    .collect();
+                Signal::from_bits(stage.update(&mut st, &values, &mut ring, &weights)).to_f64()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn isqrt_is_floor_below_2_pow_32_and_close_above() {
+        for n in [0u64, 1, 2, 3, 4, 15, 16, 17, 1 << 20, (1 << 32) - 1] {
+            let r = isqrt64(n) as u64;
+            assert!(r * r <= n && (r + 1) * (r + 1) > n, "n = {n}");
+        }
+        for n in [1u64 << 32, 1 << 40, u64::MAX / 3, u64::MAX] {
+            let exact = (n as f64).sqrt();
+            let r = isqrt64(n) as f64;
+            assert!(
+                r <= exact + 1.0 && (exact - r) / exact < 1.0 / 32768.0,
+                "n = {n}"
+            );
+        }
+    }
+
+    #[test]
+    fn low_pass_starts_at_the_first_sample_and_settles() {
+        let x = [2.0; 200];
+        let y = run(
+            StageSpec::LowPass {
+                input: 0,
+                cutoff_hz: 50.0,
+            },
+            &[&x],
+        );
+        assert_eq!(y[0], 2.0);
+        assert!((y[199] - 2.0).abs() < 1e-4);
+        let mut step = vec![0.0; 1];
+        step.extend([1.0; 300]);
+        let y = run(
+            StageSpec::LowPass {
+                input: 0,
+                cutoff_hz: 50.0,
+            },
+            &[&step],
+        );
+        let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI * 50.0));
+        assert!((y[1] - alpha).abs() < 1e-4, "{} vs {alpha}", y[1]);
+        assert!((y[300] - 1.0).abs() < 2.0 / 65536.0);
+    }
+
+    #[test]
+    fn rate_scales_by_the_detector_rate() {
+        let y = run(StageSpec::Rate { input: 0 }, &[&[1.0, 1.5, 1.25]]);
+        assert_eq!(y, vec![0.0, 500.0, -250.0]);
+    }
+
+    #[test]
+    fn vector_stages() {
+        let dot = run(
+            StageSpec::Dot {
+                a: [0, 1],
+                b: [2, 3],
+            },
+            &[&[3.0, -300.0], &[4.0, 0.0], &[-0.5, 300.0], &[0.25, 0.0]],
+        );
+        assert_eq!(dot, vec![-0.5, Signal::MIN.to_f64()]);
+        let mag = run(
+            StageSpec::Magnitude { of: [0, 1] },
+            &[&[3.0, -0.003], &[-4.0, 0.004]],
+        );
+        assert_eq!(mag[0], 5.0);
+        assert!((mag[1] - 0.005).abs() < 2.0 / 65536.0);
+        let diff = run(
+            StageSpec::Difference { a: 0, b: 1 },
+            &[&[1.0, -30000.0], &[3.0, 30000.0]],
+        );
+        assert_eq!(diff, vec![-2.0, Signal::MIN.to_f64()]);
+        assert_eq!(
+            run(StageSpec::Abs { input: 0 }, &[&[-1.5, 2.0]]),
+            vec![1.5, 2.0]
+        );
+    }
+
+    #[test]
+    fn ste_matches_its_definition() {
+        let x: Vec<f64> = (0..40).map(|k| ((k * 7) % 11) as f64 - 5.0).collect();
+        for shape in [Window::Rectangular, Window::Triangular] {
+            let n = 8usize;
+            let y = run(
+                StageSpec::Ste {
+                    input: 0,
+                    window: n as u16,
+                    shape,
+                },
+                &[&x],
+            );
+            let h: Vec<f64> = (0..n)
+                .map(|m| match shape {
+                    Window::Rectangular => 1.0,
+                    Window::Triangular => (n + 1) as f64 - ((2 * m) as f64 - (n - 1) as f64).abs(),
+                })
+                .collect();
+            let total: f64 = h.iter().sum();
+            for k in 0..x.len() {
+                let expect: f64 = (0..n)
+                    .filter(|&m| m <= k)
+                    .map(|m| x[k - m] * x[k - m] * h[m] / total)
+                    .sum();
+                assert!(
+                    (y[k] - expect).abs() < 1e-3,
+                    "{shape:?} k={k}: {} vs {expect}",
+                    y[k]
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn triangular_taps_sum_to_one() {
+        for n in [1usize, 2, 3, 32, 64, 127, 128] {
+            let mut taps = vec![0u32; n];
+            triangular(&mut taps);
+            assert_eq!(
+                taps.iter().map(|&t| t as u64).sum::<u64>(),
+                1 << 24,
+                "n = {n}"
+            );
+            assert!(taps.iter().all(|&t| t > 0));
+        }
+    }
+
+    #[test]
+    fn bad_stage_parameters() {
+        let mut weights = [0u32; STE_POOL];
+        let mut used = 0;
+        let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights);
+        assert_eq!(
+            compile(StageSpec::LowPass {
+                input: 0,
+                cutoff_hz: 600.0
+            }),
+            Err(StageError::Cutoff {
+                cutoff_hz: 600.0,
+                nyquist_hz: 500.0
+            })
+        );
+        assert!(
+            compile(StageSpec::LowPass {
+                input: 0,
+                cutoff_hz: f32::NAN
+            })
+            .is_err()
+        );
+        assert_eq!(
+            compile(StageSpec::Ste {
+                input: 0,
+                window: 0,
+                shape: Window::Rectangular
+            }),
+            Err(StageError::WindowLength { window: 0 })
+        );
+        assert_eq!(
+            compile(StageSpec::Ste {
+                input: 0,
+                window: MAX_STE_WINDOW as u16 + 1,
+                shape: Window::Rectangular
+            }),
+            Err(StageError::WindowLength {
+                window: MAX_STE_WINDOW as u16 + 1
+            })
+        );
+        for _ in 0..2 {
+            assert!(
+                compile(StageSpec::Ste {
+                    input: 0,
+                    window: MAX_STE_WINDOW as u16,
+                    shape: Window::Triangular
+                })
+                .is_ok()
+            );
+        }
+        assert_eq!(
+            compile(StageSpec::Ste {
+                input: 0,
+                window: 1,
+                shape: Window::Rectangular
+            }),
+            Err(StageError::WindowPool {
+                needed: STE_POOL + 1
+            })
+        );
+    }
+}

@@ -1,0 +1,44 @@
+#![doc = include_str!("../README.md")]
+#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod can;
+pub mod cdf;
+pub mod config;
+pub mod detector;
+pub mod feature;
+pub mod num;
+
+pub use cdf::{Cdf, CdfError, CdfSpec};
+#[cfg(feature = "std")]
+pub use config::LoadError;
+pub use config::{
+    ChannelSpec, Config, ConfigError, ContextTerm, EventSpec, FeatureSpec, Item, LevelSpec, Name,
+    PhaseSpec, Problem, SensorTerm,
+};
+pub use detector::{
+    Decision, Detector, EventId, Inputs, Level, Output, PhaseId, State, TermConfidences,
+};
+pub use feature::{StageError, StageSpec, Window};
+pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
+
+/// Most input channels a configuration may declare.
+pub const MAX_CHANNELS: usize = 16;
+/// Most features a configuration may declare.
+pub const MAX_FEATURES: usize = 16;
+/// Most events a configuration may declare.
+pub const MAX_EVENTS: usize = 8;
+/// Most phases a configuration may declare.
+pub const MAX_PHASES: usize = 8;
+/// Most context terms, and most sensor terms, per event.
+pub const MAX_TERMS: usize = 8;
+/// Longest name of a channel, feature, event or phase, in bytes.
+pub const NAME_LEN: usize = 24;
+/// Longest short-time-energy window, in samples. All STE features together hold at most
+/// twice this much history.
+pub const MAX_STE_WINDOW: usize = 128;
+
+const _: () = assert!(MAX_CHANNELS <= ChannelMask::BITS as usize);
+const _: () = assert!(MAX_EVENTS <= EventMask::BITS as usize);
+const _: () = assert!(MAX_CHANNELS + MAX_FEATURES <= u8::MAX as usize);

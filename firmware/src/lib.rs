@@ -1,0 +1,2 @@
+//! Fingertip firmware.
+#![no_std]

@@ -1,0 +1,2 @@
+//! `fingertip`: simulate, replay, evaluate and plot detector runs on the PC.
+fn main() {}

@@ -1,0 +1,1 @@
+//! The PC side of the fingertip detector.
