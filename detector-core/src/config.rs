@@ -46,8 +46,21 @@ pub struct Config {
 pub struct ChannelSpec {
     /// The channel's name, as in trace column headers.
     pub name: Name,
-    /// Its SI unit, for documentation and plots (e.g. `N`, `m/s^2`).
+    /// The unit the detector works in for this channel, for documentation and plots
+    /// (e.g. `N`, `m/s^2`, `mm`).
     pub unit: String<12>,
+    /// The detector sees each sample as its SI value times `scale` (default 1), in `unit`.
+    /// For a quantity much smaller than one SI unit, such as a position error in metres,
+    /// a scale of 1000 (`unit = "mm"`) keeps resolution: a [`crate::Signal`] resolves
+    /// 2⁻¹⁶ of the working unit. CDF parameters of features reading the channel are in
+    /// the working unit. Positive and finite.
+    #[cfg_attr(feature = "serde", serde(default = "unit_scale"))]
+    pub scale: f32,
+}
+
+#[cfg(feature = "serde")]
+fn unit_scale() -> f32 {
+    1.0
 }
 
 /// A feature: a named stage.
@@ -211,6 +224,8 @@ pub enum Problem {
     },
     /// A dwell is negative, not finite, or longer than 65 535 ticks.
     Dwell(f32),
+    /// A channel's scale is not a positive, finite number.
+    Scale(f32),
 }
 
 impl core::fmt::Display for Problem {
@@ -232,6 +247,7 @@ impl core::fmt::Display for Problem {
             Problem::Weight(w) => write!(f, "weight = {w} must be within [0, 1]"),
             Problem::WeightSum(s) => write!(f, "sensor weights sum to {s}, above 1"),
             Problem::Level { param, value, rule } => write!(f, "{param} = {value} {rule}"),
+            Problem::Scale(k) => write!(f, "scale = {k} must be a positive, finite number"),
             Problem::Dwell(d) => write!(
                 f,
                 "dwell_ms = {d} must be a finite, non-negative time of at most 65535 ticks"

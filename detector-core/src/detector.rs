@@ -72,8 +72,9 @@ pub struct Decision {
 /// One tick's inputs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Inputs {
-    /// Channel samples, in the configuration's channel order; entries past the channel
-    /// count are ignored.
+    /// Channel samples in each channel's working unit (SI × its scale, see
+    /// [`Detector::sample_from_si`]), in the configuration's channel order; entries past
+    /// the channel count are ignored.
     pub samples: [Signal; MAX_CHANNELS],
     /// Channels currently known bad (sensor fault, stale context): bit `i` for channel `i`.
     pub faults: ChannelMask,
@@ -174,7 +175,7 @@ impl State {
 
     /// The term confidences computed for `event` at the last tick: (context terms, sensor
     /// terms), in configuration order. Stale for events outside the active phase.
-    pub fn term_confidences(
+    pub fn terms(
         &self,
         detector: &Detector,
         event: EventId,
@@ -212,6 +213,7 @@ impl TermConfidences {
 pub struct Detector {
     rate_hz: f32,
     channel_names: Vec<Name, MAX_CHANNELS>,
+    channel_scales: Vec<f32, MAX_CHANNELS>,
     feature_names: Vec<Name, MAX_FEATURES>,
     event_names: Vec<Name, MAX_EVENTS>,
     phase_names: Vec<Name, MAX_PHASES>,
@@ -315,6 +317,13 @@ impl Detector {
         let channel_names: Vec<Name, MAX_CHANNELS> =
             config.channels.iter().map(|c| c.name.clone()).collect();
         unique(channel_names.iter(), Item::Channel)?;
+        let mut channel_scales = Vec::new();
+        for c in &config.channels {
+            if !(c.scale.is_finite() && c.scale > 0.0) {
+                return err(Item::Channel(c.name.clone()), Problem::Scale(c.scale));
+            }
+            let _ = channel_scales.push(c.scale);
+        }
         let feature_names: Vec<Name, MAX_FEATURES> =
             config.features.iter().map(|f| f.name.clone()).collect();
         unique(feature_names.iter(), Item::Feature)?;
@@ -369,8 +378,7 @@ impl Detector {
             let _ = stages.push(stage);
         }
 
-        let feature_slot = |event: &Name, feature: &Name, item: Item| -> Result<u8, ConfigError> {
-            let _ = event;
+        let feature_slot = |feature: &Name, item: Item| -> Result<u8, ConfigError> {
             match feature_names.iter().position(|g| g == feature) {
                 Some(j) => Ok((MAX_CHANNELS + j) as u8),
                 None => err(item, Problem::UnknownFeature(feature.clone())),
@@ -384,7 +392,7 @@ impl Detector {
             let mut context = Vec::new();
             for t in &e.context {
                 let item = || Item::ContextTerm(e.name.clone(), t.feature.clone());
-                let slot = feature_slot(&e.name, &t.feature, item())?;
+                let slot = feature_slot(&t.feature, item())?;
                 let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
                 let channels = slot_channels.get(usize::from(slot)).copied().unwrap_or(0);
                 let _ = context.push(Term {
@@ -399,7 +407,7 @@ impl Detector {
             let mut total_q15 = 0u32;
             for t in &e.sensor {
                 let item = || Item::SensorTerm(e.name.clone(), t.feature.clone());
-                let slot = feature_slot(&e.name, &t.feature, item())?;
+                let slot = feature_slot(&t.feature, item())?;
                 let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
                 let Some(weight) = Confidence::from_f32(t.weight) else {
                     return err(item(), Problem::Weight(t.weight));
@@ -480,6 +488,7 @@ impl Detector {
         Ok(Detector {
             rate_hz,
             channel_names,
+            channel_scales,
             feature_names,
             event_names,
             phase_names,
@@ -511,6 +520,19 @@ impl Detector {
     /// Channel names, in sample order.
     pub fn channels(&self) -> &[Name] {
         &self.channel_names
+    }
+
+    /// Each channel's scale: the detector sees SI value × scale (see
+    /// [`crate::ChannelSpec::scale`]).
+    pub fn channel_scales(&self) -> &[f32] {
+        &self.channel_scales
+    }
+
+    /// The sample for channel `index` from its value in SI units: scaled, rounded and
+    /// saturated (NaN gives zero).
+    pub fn sample_from_si(&self, index: usize, si: f64) -> Signal {
+        let scale = self.channel_scales.get(index).copied().unwrap_or(1.0);
+        Signal::from_f64(si * f64::from(scale))
     }
 
     /// Feature names, in evaluation order.

@@ -1,2 +1,16 @@
-//! Fingertip firmware.
-#![no_std]
+#![doc = include_str!("../README.md")]
+#![cfg_attr(not(test), no_std)]
+#![warn(missing_docs)]
+
+pub mod boot;
+pub mod calib;
+pub mod checksum;
+pub mod engine;
+pub mod rail;
+pub mod reset;
+pub mod sampling;
+pub mod shared;
+pub mod supervise;
+pub mod timing;
+pub mod tmp117;
+pub mod wiring;

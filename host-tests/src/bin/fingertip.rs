@@ -1,2 +1,445 @@
-//! `fingertip`: simulate, replay, evaluate and plot detector runs on the PC.
-fn main() {}
+//! `fingertip`: design and prove a fingertip event detector on the PC.
+//!
+//! Simulate the paper's Table 1 runs, replay any trace through the same fixed-point core
+//! that runs on the chip, evaluate many randomized runs, and plot confidences over time.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use clap::{Parser, Subcommand};
+use detector_core::{Config, Detector};
+use host_tests::plot::{self, RunPlot};
+use host_tests::replay::{self, DecisionRecord};
+use host_tests::score::{self, Outcome, ScenarioReport};
+use host_tests::sim::{self, Scenario, SimOptions};
+use host_tests::trace::Trace;
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+#[derive(Parser)]
+#[command(name = "fingertip", version, about = "Design and prove a fingertip event detector on the PC")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a scenario and write its trace (CSV; see docs/trace-format.md).
+    Simulate {
+        /// Scenario name; `fingertip scenarios` lists them.
+        scenario: String,
+        /// Seed of the noise (and of the parameters, with --randomize).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Draw speeds, stiffness, masses, onset, noise and gains from their ranges instead
+        /// of the nominal Table 1 values.
+        #[arg(long)]
+        randomize: bool,
+        /// Output file; standard output when absent.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// List the scenarios and the event each should raise.
+    Scenarios,
+    /// Run the detector over a trace: confirmations with their latency, per-tick confidences,
+    /// a plot.
+    Replay {
+        /// The trace (CSV).
+        trace: PathBuf,
+        /// Detector configuration (TOML); the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Write per-tick confidences here (CSV).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write a plot here (.png or .svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Print one JSON object to standard output instead of text.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Randomized runs of every scenario: detections, errors, latency, false alarms.
+    Evaluate {
+        /// Randomized runs per scenario.
+        #[arg(long, default_value_t = 1000)]
+        runs: usize,
+        /// Base seed; run k of a scenario uses a seed derived from it.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Detector configuration (TOML); the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Hours of simulated event-free motion for the false-alarm rate.
+        #[arg(long, default_value_t = 1.0)]
+        free_hours: f64,
+        /// Also write the report as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Simulate the four runs of the paper's figure 4 and a sudden acceleration, print who
+    /// was detected when, and write the figures.
+    Demo {
+        /// Where to write the figures.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(message) => {
+            eprintln!("error: {message}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+type Result<T> = std::result::Result<T, String>;
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Simulate { scenario, seed, randomize, out } => simulate(&scenario, seed, randomize, out.as_deref()),
+        Command::Scenarios => {
+            for s in Scenario::all() {
+                println!("{:<26} {}", s.name(), s.expected().unwrap_or("none"));
+            }
+            Ok(())
+        }
+        Command::Replay { trace, config, out, plot, json } => {
+            replay_cmd(&trace, config.as_deref(), out.as_deref(), plot.as_deref(), json)
+        }
+        Command::Evaluate { runs, seed, config, free_hours, json } => {
+            evaluate(runs, seed, config.as_deref(), free_hours, json.as_deref())
+        }
+        Command::Demo { out } => demo(&out),
+    }
+}
+
+/// The detector from `--config`, or the approach configuration.
+fn load_detector(path: Option<&Path>) -> Result<(Detector, String)> {
+    let (text, name) = match path {
+        Some(p) => (
+            std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?,
+            p.display().to_string(),
+        ),
+        None => (host_tests::APPROACH_TOML.to_string(), "configs/approach.toml".to_string()),
+    };
+    let config = Config::from_toml(&text).map_err(|e| format!("{name}: {e}"))?;
+    let detector = Detector::build(&config).map_err(|e| format!("{name}: {e}"))?;
+    Ok((detector, name))
+}
+
+fn find_scenario(name: &str) -> Result<Scenario> {
+    name.parse::<Scenario>().map_err(|e| e.to_string())
+}
+
+fn simulate(name: &str, seed: u64, randomize: bool, out: Option<&Path>) -> Result<()> {
+    let scenario = find_scenario(name)?;
+    let trace = sim::simulate(&scenario, &SimOptions { seed, randomize, ..SimOptions::default() })
+        .map_err(|e| e.to_string())?;
+    match out {
+        Some(path) => trace.write(path).map_err(|e| e.to_string()),
+        None => {
+            print!("{}", trace.to_csv());
+            Ok(())
+        }
+    }
+}
+
+/// A replay with every tick's confidences kept, for plots and CSV output.
+struct Recorded {
+    decisions: Vec<DecisionRecord>,
+    /// Per event of the configuration: name and confidence per tick.
+    series: Vec<(String, Vec<f64>)>,
+    /// Per feature of the configuration: name and value per tick.
+    features: Vec<(String, Vec<f64>)>,
+}
+
+fn record(detector: &Detector, trace: &Trace) -> Result<Recorded> {
+    let names: Vec<String> = detector.events().iter().map(|n| n.to_string()).collect();
+    let feature_names: Vec<String> = detector.features().iter().map(|n| n.to_string()).collect();
+    let mut values = vec![Vec::with_capacity(trace.len()); names.len()];
+    let mut features = vec![Vec::with_capacity(trace.len()); feature_names.len()];
+    let decisions = replay::replay(detector, trace, |_, state, out| {
+        for (v, c) in values.iter_mut().zip(out.confidences.iter()) {
+            v.push(c.to_f64());
+        }
+        for (k, f) in features.iter_mut().enumerate() {
+            f.push(state.feature(k).map_or(f64::NAN, |x| x.to_f64()));
+        }
+    })
+    .map_err(|e| e.to_string())?;
+    Ok(Recorded {
+        decisions,
+        series: names.into_iter().zip(values).collect(),
+        features: feature_names.into_iter().zip(features).collect(),
+    })
+}
+
+fn truth_of(trace: &Trace) -> Option<(String, f64)> {
+    trace
+        .truth_onset()
+        .and_then(|(row, event)| trace.time().get(row).map(|&t| (event.to_string(), t)))
+}
+
+/// Writes per-tick event confidences and feature values as CSV, through a temporary file so a failure never leaves
+/// a partial file behind.
+fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -> Result<()> {
+    let mut text = String::new();
+    let _ = writeln!(text, "# fingertip replay of {} with {}", trace.name(), config);
+    let _ = writeln!(text, "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit");
+    let header: Vec<String> = rec
+        .series
+        .iter()
+        .map(|(n, _)| n.clone())
+        .chain(rec.features.iter().map(|(n, _)| format!("feature:{n}")))
+        .collect();
+    let _ = writeln!(text, "t,{}", header.join(","));
+    for (k, t) in trace.time().iter().enumerate() {
+        let _ = write!(text, "{t:.6}");
+        for (_, v) in &rec.series {
+            let _ = write!(text, ",{:.5}", v.get(k).copied().unwrap_or(0.0));
+        }
+        for (_, v) in &rec.features {
+            let _ = write!(text, ",{:.6}", v.get(k).copied().unwrap_or(0.0));
+        }
+        text.push('\n');
+    }
+    write_atomically(path, text.as_bytes())
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let tmp = path.with_extension("partial");
+    std::fs::write(&tmp, bytes)
+        .and_then(|()| std::fs::rename(&tmp, path))
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            format!("{}: {e}", path.display())
+        })
+}
+
+fn describe(d: &DecisionRecord, truth: Option<&(String, f64)>) -> String {
+    let mut s = format!(
+        "{:>9.2} ms  {:<15} {:<8} confidence {:.3}  onset {:.2} ms",
+        d.t_s * 1e3,
+        d.event,
+        d.level,
+        d.confidence,
+        d.onset_s * 1e3
+    );
+    if let Some((event, onset)) = truth {
+        let _ = write!(s, "  ({:+.2} ms after the true {event} onset)", (d.t_s - onset) * 1e3);
+    }
+    s
+}
+
+fn replay_cmd(path: &Path, config: Option<&Path>, out: Option<&Path>, plot_to: Option<&Path>, json: bool) -> Result<()> {
+    let (detector, config_name) = load_detector(config)?;
+    let trace = Trace::read(path).map_err(|e| e.to_string())?;
+    let rec = record(&detector, &trace)?;
+    let truth = truth_of(&trace);
+    if let Some(out) = out {
+        write_confidences(out, &trace, &rec, &config_name)?;
+    }
+    if let Some(p) = plot_to {
+        let run = RunPlot {
+            title: trace.name().to_string(),
+            t: trace.time(),
+            series: rec.series.clone(),
+            truth: truth.clone(),
+            decisions: &rec.decisions,
+        };
+        plot::write_run(p, &run).map_err(|e| e.to_string())?;
+    }
+    if json {
+        let report = serde_json::json!({
+            "trace": trace.name(),
+            "config": config_name,
+            "truth": truth.as_ref().map(|(e, t)| serde_json::json!({"event": e, "onset_s": t})),
+            "events": rec.decisions,
+        });
+        println!("{report}");
+        return Ok(());
+    }
+    println!("{} with {}: {} ticks at {} Hz", trace.name(), config_name, trace.len(), detector.rate_hz());
+    if let Some((event, onset)) = &truth {
+        println!("true event: {event} at {:.2} ms", onset * 1e3);
+    }
+    if rec.decisions.is_empty() {
+        println!("no level raised");
+    }
+    for d in &rec.decisions {
+        println!("{}", describe(d, truth.as_ref()));
+    }
+    Ok(())
+}
+
+/// Length of each simulated stretch of event-free motion [s].
+const FREE_RUN_S: f64 = 60.0;
+
+/// Seed of run `k` of scenario `s`, spread so that no two runs share one.
+fn run_seed(base: u64, scenario: usize, k: usize) -> u64 {
+    base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ ((scenario as u64) << 40) ^ k as u64
+}
+
+fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json: Option<&Path>) -> Result<()> {
+    let (detector, config_name) = load_detector(config)?;
+    if runs == 0 {
+        return Err("--runs must be at least 1".into());
+    }
+    if !(free_hours.is_finite() && free_hours >= 0.0) {
+        return Err(format!("--free-hours = {free_hours} must be a non-negative number"));
+    }
+    let scenarios = Scenario::table1();
+    let free = Scenario::FreeMotion;
+    let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
+    let jobs: Vec<(usize, usize)> = (0..scenarios.len())
+        .flat_map(|s| (0..runs).map(move |k| (s, k)))
+        .chain((0..free_runs).map(|k| (usize::MAX, k)))
+        .collect();
+
+    let bar = ProgressBar::new(jobs.len() as u64).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")
+            .map_err(|e| e.to_string())?
+            .progress_chars("=> "),
+    );
+    let started = Instant::now();
+    let results: Vec<Result<(usize, Outcome, f64)>> = jobs
+        .par_iter()
+        .map(|&(s, k)| {
+            let (scenario, duration_s) = if s == usize::MAX {
+                (&free, Some(FREE_RUN_S))
+            } else {
+                (scenarios.get(s).ok_or("no such scenario")?, None)
+            };
+            let opts = SimOptions { seed: run_seed(seed, s, k), randomize: true, duration_s, ..SimOptions::default() };
+            let trace = sim::simulate(scenario, &opts).map_err(|e| e.to_string())?;
+            let decisions = replay::replay(&detector, &trace, |_, _, _| {}).map_err(|e| e.to_string())?;
+            let truth = truth_of(&trace);
+            let expected = scenario.expected().map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+            bar.inc(1);
+            Ok((s, score::classify(expected, &decisions), trace.len() as f64 / trace.rate_hz()))
+        })
+        .collect();
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+
+    let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
+    let mut free_alarms = 0usize;
+    let mut free_seconds = 0.0;
+    let mut simulated = 0.0;
+    for r in results {
+        let (s, outcome, seconds) = r?;
+        simulated += seconds;
+        if s == usize::MAX {
+            free_seconds += seconds;
+            free_alarms += usize::from(!outcome.is_right());
+        } else if let Some(o) = outcomes.get_mut(s) {
+            o.push(outcome);
+        }
+    }
+    let reports: Vec<ScenarioReport> = scenarios
+        .iter()
+        .zip(&outcomes)
+        .map(|(s, o)| ScenarioReport::tally(s.name(), s.expected(), o))
+        .collect();
+    let free_hours_run = free_seconds / 3600.0;
+    let alarms_per_hour = if free_hours_run > 0.0 { free_alarms as f64 / free_hours_run } else { 0.0 };
+
+    println!("{config_name}: {runs} randomized runs per scenario, base seed {seed}");
+    println!(
+        "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
+        "scenario", "expected", "runs", "right", "wrong", "missed", "med ms", "p95 ms", "p99 ms", "max ms"
+    );
+    for r in &reports {
+        println!(
+            "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
+            r.name, r.expected, r.runs, r.correct, r.wrong, r.missed, r.latency_ms.median, r.latency_ms.p95,
+            r.latency_ms.p99, r.latency_ms.max
+        );
+    }
+    println!(
+        "false alarms: {free_alarms} runs with a confirmation in {free_hours_run:.2} h of event-free motion = {alarms_per_hour:.2} per hour"
+    );
+    println!(
+        "throughput: {simulated:.0} simulated s in {wall:.1} wall s = {:.0} simulated s per wall s ({} threads)",
+        simulated / wall.max(1e-9),
+        rayon::current_num_threads()
+    );
+    if let Some(path) = json {
+        let report = serde_json::json!({
+            "config": config_name,
+            "runs_per_scenario": runs,
+            "seed": seed,
+            "scenarios": reports,
+            "false_alarms": free_alarms,
+            "false_alarms_per_hour": alarms_per_hour,
+            "free_motion_hours": free_hours_run,
+            "simulated_s_per_wall_s": simulated / wall.max(1e-9),
+        });
+        let text = serde_json::to_string_pretty(&report).map_err(|e| e.to_string())?;
+        write_atomically(path, text.as_bytes())?;
+    }
+    Ok(())
+}
+
+fn demo(out: &Path) -> Result<()> {
+    let (detector, config_name) = load_detector(None)?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let runs = [
+        ("contact_hard_8", "Contact, hard object, 8 cm/s"),
+        ("contact_soft_2", "Contact, soft object, 2 cm/s"),
+        ("disturbance_large_5", "Disturbance (vibration), 5 cm/s"),
+        ("link_collision_8", "Link collision, 8 cm/s"),
+        ("sudden_accel_moving_5", "Sudden acceleration while moving, 5 cm/s"),
+    ];
+    println!("fingertip demo: {config_name}, nominal Table 1 runs, event at t = 20 ms\n");
+    let mut traces = Vec::new();
+    let mut recs = Vec::new();
+    for (name, _) in runs {
+        let scenario = find_scenario(name)?;
+        let trace = sim::simulate(&scenario, &SimOptions { seed: 1, randomize: false, ..SimOptions::default() })
+            .map_err(|e| e.to_string())?;
+        recs.push(record(&detector, &trace)?);
+        traces.push((scenario, trace));
+    }
+    let mut plots = Vec::new();
+    for (((scenario, trace), rec), (_, title)) in traces.iter().zip(&recs).zip(runs) {
+        let truth = truth_of(trace);
+        let expected = scenario.expected().map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+        let verdict = match score::classify(expected, &rec.decisions) {
+            Outcome::Correct { latency_s } => format!("{} confirmed {:.2} ms after onset", scenario.expected().unwrap_or(""), latency_s * 1e3),
+            Outcome::QuietAsExpected => "nothing confirmed, as expected".to_string(),
+            Outcome::Missed => "MISSED".to_string(),
+            Outcome::Wrong { event, t_s } => format!("WRONG: {event} confirmed at {:.2} ms", t_s * 1e3),
+        };
+        println!("{title}: {verdict}");
+        for d in &rec.decisions {
+            println!("  {}", describe(d, truth.as_ref()));
+        }
+        let run = RunPlot {
+            title: title.to_string(),
+            t: trace.time(),
+            series: rec.series.clone(),
+            truth,
+            decisions: &rec.decisions,
+        };
+        for ext in ["png", "svg"] {
+            let p = out.join(format!("{}.{ext}", scenario.name()));
+            plot::write_run(&p, &run).map_err(|e| e.to_string())?;
+        }
+        plots.push(run);
+    }
+    let figure: Vec<RunPlot<'_>> = plots.iter().take(4).cloned().collect();
+    for ext in ["png", "svg"] {
+        let p = out.join(format!("figure4.{ext}"));
+        plot::write_grid(&p, &figure, 2, (800, 380)).map_err(|e| e.to_string())?;
+    }
+    println!("\nfigures: {}/figure4.png (.svg) and one per run", out.display());
+    Ok(())
+}

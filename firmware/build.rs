@@ -1,0 +1,126 @@
+//! Prepares what the firmware embeds, on the PC:
+//!
+//! - the detector configuration `configs/approach.toml` (or the file named by
+//!   `FINGERTIP_CONFIG`, relative to the workspace root), parsed and validated with the
+//!   core's `std` feature (a bad configuration fails the build with the core's message),
+//!   checked against the channels the board can feed and the sample timer's clock, and
+//!   written as postcard bytes (`config.postcard`) that the chip decodes at boot;
+//! - `build_consts.rs`: the configuration's CRC-32 (reported in the status heartbeat),
+//!   its source path, and the CAN node id from `FINGERTIP_NODE_ID` (0..=15, default 0);
+//! - for the chip only: `memory.x` on the linker path and the link arguments of the
+//!   board binary (`-Tlink.x`, `-Tdefmt.x`, `--nmagic`), for the binary alone so that no
+//!   other crate built for the target is made to link defmt.
+
+use std::env;
+use std::error::Error;
+use std::fmt::Write as _;
+use std::fs;
+use std::path::PathBuf;
+
+use detector_core::Config;
+
+#[allow(dead_code)]
+#[path = "src/wiring.rs"]
+mod wiring;
+
+#[path = "src/checksum.rs"]
+mod checksum;
+
+type Result<T> = std::result::Result<T, Box<dyn Error>>;
+
+const DEFAULT_CONFIG: &str = "configs/approach.toml";
+
+fn main() -> Result<()> {
+    let manifest = PathBuf::from(env::var("CARGO_MANIFEST_DIR")?);
+    let root = manifest.join("..");
+    let out = PathBuf::from(env::var("OUT_DIR")?);
+
+    println!("cargo:rerun-if-env-changed=FINGERTIP_CONFIG");
+    println!("cargo:rerun-if-env-changed=FINGERTIP_NODE_ID");
+    println!("cargo:rerun-if-changed=src/wiring.rs");
+    println!("cargo:rerun-if-changed=src/checksum.rs");
+
+    let config_rel = env::var("FINGERTIP_CONFIG").unwrap_or_else(|_| DEFAULT_CONFIG.into());
+    let config_path = root.join(&config_rel);
+    println!("cargo:rerun-if-changed={}", config_path.display());
+    let text = fs::read_to_string(&config_path)
+        .map_err(|e| format!("reading {}: {e}", config_path.display()))?;
+    let config = Config::from_toml(&text).map_err(|e| format!("{config_rel}: {e}"))?;
+    check_channels(&config).map_err(|e| format!("{config_rel}: {e}"))?;
+    check_rate(config.rate_hz).map_err(|e| format!("{config_rel}: {e}"))?;
+
+    let bytes = postcard::to_stdvec(&config)?;
+    let back: Config = postcard::from_bytes(&bytes)?;
+    if back != config {
+        return Err(format!("{config_rel} does not survive a postcard round trip").into());
+    }
+    fs::write(out.join("config.postcard"), &bytes)?;
+
+    let node = match env::var("FINGERTIP_NODE_ID") {
+        Ok(s) => s
+            .trim()
+            .parse::<u8>()
+            .ok()
+            .filter(|n| *n <= 15)
+            .ok_or_else(|| format!("FINGERTIP_NODE_ID = {s:?} is not a node id in 0..=15"))?,
+        Err(_) => 0,
+    };
+
+    let mut consts = String::new();
+    writeln!(consts, "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded configuration's postcard bytes.")?;
+    writeln!(consts, "pub const CONFIG_CHECKSUM: u32 = {:#010x};", checksum::crc32(&bytes))?;
+    writeln!(consts, "/// The configuration file the firmware was built with, from the workspace root.")?;
+    writeln!(consts, "pub const CONFIG_SOURCE: &str = {config_rel:?};")?;
+    writeln!(consts, "/// The CAN node id the firmware was built for (`FINGERTIP_NODE_ID`, 0..=15).")?;
+    writeln!(consts, "pub const NODE_ID: u8 = {node};")?;
+    fs::write(out.join("build_consts.rs"), consts)?;
+
+    if env::var("CARGO_CFG_TARGET_OS")? == "none" {
+        // cortex-m-rt's link.x includes `memory.x`; the workspace root holds the STM32's.
+        let memory = root.join("memory.x");
+        println!("cargo:rerun-if-changed={}", memory.display());
+        let dir = out.join("link");
+        fs::create_dir_all(&dir)?;
+        fs::copy(&memory, dir.join("memory.x"))?;
+        println!("cargo:rustc-link-search={}", dir.display());
+        println!("cargo:rustc-link-arg-bins=--nmagic");
+        println!("cargo:rustc-link-arg-bins=-Tlink.x");
+        println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
+    }
+    Ok(())
+}
+
+/// Every configured channel must be one the board feeds; a channel nobody writes would
+/// sit at zero and look like a real measurement.
+fn check_channels(config: &Config) -> Result<()> {
+    for c in &config.channels {
+        if !wiring::ALL_CHANNELS.contains(&c.name.as_str()) {
+            return Err(format!(
+                "channel '{}' has no source on the board (it can feed {})",
+                c.name,
+                wiring::ALL_CHANNELS.join(", ")
+            )
+            .into());
+        }
+    }
+    Ok(())
+}
+
+/// The ADC trigger period is a whole number of timer clocks: the rate it gives must be
+/// the configured one, or the detector's tick would not keep time.
+fn check_rate(rate_hz: f32) -> Result<()> {
+    let rate = f64::from(rate_hz);
+    let clocks = (f64::from(wiring::SAMPLE_TIMER_CLOCK_HZ) / rate).round();
+    let actual = f64::from(wiring::SAMPLE_TIMER_CLOCK_HZ) / clocks;
+    let ppm = ((actual - rate) / rate * 1e6).abs();
+    if ppm > f64::from(wiring::MAX_RATE_ERROR_PPM) {
+        return Err(format!(
+            "rate_hz = {rate_hz}: the {} Hz sample timer can only make {actual:.3} Hz \
+             ({ppm:.0} ppm off, at most {} allowed)",
+            wiring::SAMPLE_TIMER_CLOCK_HZ,
+            wiring::MAX_RATE_ERROR_PPM
+        )
+        .into());
+    }
+    Ok(())
+}

@@ -1,0 +1,631 @@
+//! The detector task's work for one tick, free of hardware so it runs on the PC: merge
+//! the newest analog sample with the controller's context (withheld and flagged faulty
+//! when stale), follow the controller's phase, run the core, keep the status, and turn
+//! the output into CAN frames (events at once, the decimated confidence stream, the
+//! heartbeat) with the core's transmitter.
+//!
+//! The board's detector task only adds the cycle counter and the queues around
+//! [`Engine::tick`].
+
+use detector_core::can::{
+    FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status, Transmitter,
+    TxConfigError, TxFrames, TxState,
+};
+use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
+
+use crate::sampling::AdcSample;
+use crate::shared::Shared;
+use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
+
+/// Where the board's inputs go in the configuration's channel order: `None` for an
+/// input the configuration does not use.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ChannelMap {
+    /// The [`ADC_CHANNELS`], in scan order.
+    pub adc: [Option<u8>; ADC_CHANNELS.len()],
+    /// The [`CONTEXT_CHANNELS`]: vel_des x, y, acc_des x, y.
+    pub context: [Option<u8>; CONTEXT_CHANNELS.len()],
+    /// The [`TIP_STATE_CHANNELS`]: pos_err x, y.
+    pub tip_state: [Option<u8>; TIP_STATE_CHANNELS.len()],
+}
+
+impl ChannelMap {
+    /// Looks the board's channels up in a detector's configuration by name.
+    pub fn resolve(detector: &Detector) -> ChannelMap {
+        let find = |name: &&str| detector.channel(name).and_then(|i| u8::try_from(i).ok());
+        ChannelMap {
+            adc: ADC_CHANNELS.each_ref().map(find),
+            context: CONTEXT_CHANNELS.each_ref().map(find),
+            tip_state: TIP_STATE_CHANNELS.each_ref().map(find),
+        }
+    }
+
+    fn mask(slots: &[Option<u8>]) -> ChannelMask {
+        slots
+            .iter()
+            .flatten()
+            .fold(0, |m, &i| m | 1u32.checked_shl(u32::from(i)).unwrap_or(0))
+    }
+
+    /// The configuration channels fed by the context frame.
+    pub fn context_mask(&self) -> ChannelMask {
+        ChannelMap::mask(&self.context)
+    }
+
+    /// The configuration channels fed by the tip state frame.
+    pub fn tip_state_mask(&self) -> ChannelMask {
+        ChannelMap::mask(&self.tip_state)
+    }
+}
+
+/// The engine's fixed parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EngineParams {
+    /// This fingertip's node id.
+    pub node: NodeId,
+    /// Why the board last reset (reported in every heartbeat).
+    pub reset: ResetReason,
+    /// The configuration's checksum (reported in the heartbeat).
+    pub config_checksum: u32,
+    /// Context and tip state go stale this long after their last good frame, ms.
+    pub context_timeout_ms: u32,
+    /// The phase goes stale this long after its last good frame, ms.
+    pub phase_timeout_ms: u32,
+}
+
+impl EngineParams {
+    /// Context stale after 20 ms (twenty missed frames at the controller's 1 kHz), phase
+    /// after 100 ms.
+    pub const fn new(node: NodeId, reset: ResetReason, config_checksum: u32) -> EngineParams {
+        EngineParams {
+            node,
+            reset,
+            config_checksum,
+            context_timeout_ms: 20,
+            phase_timeout_ms: 100,
+        }
+    }
+}
+
+/// The engine cannot be set up for this detector.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum EngineError {
+    /// The detector rate does not fit the CAN protocol (1..=65535 Hz).
+    Rate(f32),
+    /// The receiver refused its parameters.
+    Receiver(RxConfigError),
+    /// The transmitter refused its parameters.
+    Transmitter(TxConfigError),
+}
+
+impl core::fmt::Display for EngineError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            EngineError::Rate(r) => write!(f, "detector rate {r} Hz is not within 1..=65535"),
+            EngineError::Receiver(e) => write!(f, "CAN receiver: {e}"),
+            EngineError::Transmitter(e) => write!(f, "CAN transmitter: {e}"),
+        }
+    }
+}
+
+/// What the rest of the board reports into the heartbeat, gathered by the detector task.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Health {
+    /// Ticks that overran their period since boot.
+    pub overruns: u32,
+    /// Longest tick so far, 0.1 µs.
+    pub worst_tick: u16,
+    /// CAN error events since boot.
+    pub bus_errors: u32,
+    /// Frames not sent since boot (queue full, mailbox replaced).
+    pub tx_dropped: u32,
+    /// Flags latched since the last heartbeat (overrun, bus error, frame dropped).
+    pub latched: FaultFlags,
+    /// The temperature sensor is faulty.
+    pub sensor_fault: bool,
+}
+
+/// The result of one tick.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct TickResult {
+    /// The core's output.
+    pub output: Output,
+    /// The frames to send, highest priority first.
+    pub frames: TxFrames,
+    /// A heartbeat is among the frames: the latched flags it reported can be cleared.
+    pub heartbeat: bool,
+}
+
+/// The flags a heartbeat reports as "since the last heartbeat".
+pub const LATCHED_FLAGS: FaultFlags =
+    FaultFlags(FaultFlags::OVERRUN.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
+
+fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
+    ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
+}
+
+/// The detector task's state and logic.
+pub struct Engine<'d> {
+    detector: &'d Detector,
+    state: State,
+    map: ChannelMap,
+    receiver: Receiver,
+    transmitter: Transmitter,
+    tx: TxState,
+    status: Status,
+    applied_phase: Option<(u8, u8)>,
+    inputs: Inputs,
+}
+
+impl<'d> Engine<'d> {
+    /// An engine for `detector` with a fresh state (first phase active).
+    pub fn new(detector: &'d Detector, params: EngineParams) -> Result<Engine<'d>, EngineError> {
+        let rate = detector.rate_hz();
+        if !(1.0..=65_535.0).contains(&rate) {
+            return Err(EngineError::Rate(rate));
+        }
+        let rate_hz = (rate + 0.5) as u32;
+        let phases = u8::try_from(detector.phases().len()).unwrap_or(u8::MAX);
+        let receiver = Receiver::new(
+            params.node,
+            phases,
+            ms_to_ticks(params.context_timeout_ms, rate_hz),
+            ms_to_ticks(params.phase_timeout_ms, rate_hz),
+        )
+        .map_err(EngineError::Receiver)?;
+        let transmitter =
+            Transmitter::with_defaults(params.node, rate_hz).map_err(EngineError::Transmitter)?;
+        let status = Status {
+            reset: params.reset,
+            tick_rate_hz: rate_hz as u16,
+            config_checksum: params.config_checksum,
+            ..Status::default()
+        };
+        Ok(Engine {
+            detector,
+            state: detector.new_state(),
+            map: ChannelMap::resolve(detector),
+            receiver,
+            transmitter,
+            tx: TxState::new(),
+            status,
+            applied_phase: None,
+            inputs: Inputs::default(),
+        })
+    }
+
+    /// The detector this engine runs.
+    pub fn detector(&self) -> &'d Detector {
+        self.detector
+    }
+
+    /// The receiver (the CAN receive task uses a copy).
+    pub fn receiver(&self) -> Receiver {
+        self.receiver
+    }
+
+    /// Where the board's channels go.
+    pub fn channel_map(&self) -> &ChannelMap {
+        &self.map
+    }
+
+    /// The status as last reported.
+    pub fn status(&self) -> &Status {
+        &self.status
+    }
+
+    /// The detector's state.
+    pub fn state(&self) -> &State {
+        &self.state
+    }
+
+    /// One tick on the newest analog sample: its tick is the detector's `now`.
+    pub fn tick(&mut self, sample: &AdcSample, shared: &Shared, health: &Health) -> TickResult {
+        let now = sample.tick;
+        let receiver = self.receiver;
+        let status = &mut self.status;
+        // Under the receive-state mutex: only the core's bookkeeping, no detector work.
+        let (controller, phase) = shared.with_rx(|rx| {
+            receiver.poll(rx, now);
+            status.update_from_rx(&receiver, rx, now);
+            (receiver.inputs(rx, now), rx.link().phase())
+        });
+
+        // Follow the controller's phase command (a new phase, or the same phase started
+        // again under a new sequence number).
+        if let Some(p) = phase {
+            let key = (p.phase, p.sequence);
+            if self.applied_phase != Some(key) {
+                if let Some(id) = self.detector.phase_at(p.phase) {
+                    self.detector.set_phase(&mut self.state, id);
+                }
+                self.applied_phase = Some(key);
+            }
+        }
+
+        let map = &self.map;
+        let inputs = &mut self.inputs;
+        inputs.faults = 0;
+        let mut put = |slot: Option<u8>, value: Option<detector_core::Signal>| {
+            if let Some(i) = slot {
+                let i = usize::from(i);
+                match (inputs.samples.get_mut(i), value) {
+                    (Some(s), Some(v)) => *s = v,
+                    // Withheld: keep the last value (the core ignores it) and flag it.
+                    _ => inputs.faults |= 1u32.checked_shl(i as u32).unwrap_or(0),
+                }
+            }
+        };
+        for (k, (&slot, &value)) in map.adc.iter().zip(&sample.values).enumerate() {
+            let ok = sample.faults & (1 << k) == 0;
+            put(slot, ok.then_some(value));
+        }
+        let vel = controller.vel_des;
+        let acc = controller.acc_des;
+        for (k, &slot) in map.context.iter().enumerate() {
+            let v = match k {
+                0 | 1 => vel.and_then(|v| v.get(k).copied()),
+                _ => acc.and_then(|a| a.get(k - 2).copied()),
+            };
+            put(slot, v);
+        }
+        for (k, &slot) in map.tip_state.iter().enumerate() {
+            put(slot, controller.pos_err.and_then(|p| p.get(k).copied()));
+        }
+
+        let output = self.detector.tick(&mut self.state, now, &self.inputs);
+
+        let s = &mut self.status;
+        s.overruns = health.overruns;
+        s.worst_tick = health.worst_tick;
+        s.bus_errors = health.bus_errors;
+        s.tx_dropped = health.tx_dropped.saturating_add(self.tx.dropped());
+        for flag in [FaultFlags::OVERRUN, FaultFlags::BUS_ERROR, FaultFlags::TX_DROPPED] {
+            s.faults.set(flag, health.latched.contains(flag));
+        }
+        s.faults.set(
+            FaultFlags::SENSOR_FAULT,
+            sample.faults != 0 || health.sensor_fault,
+        );
+
+        let frames = self.transmitter.tick(&mut self.tx, now, &output, &self.status);
+        let heartbeat = frames.iter().any(|f| {
+            MessageKind::from_raw_id(f.id().as_raw()).is_some_and(|(k, _)| k == MessageKind::Status)
+        });
+        TickResult {
+            output,
+            frames,
+            heartbeat,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::boot;
+    use detector_core::can::{
+        CanFrame, ContextMsg, Counter, EventMsg, Message, PhaseMsg, StatusPage, TipStateMsg,
+    };
+    use detector_core::{Config, Level, Signal};
+
+    /// A small configuration of our own, so these tests check the plumbing whatever the
+    /// tuning of `configs/approach.toml`. Channels in an order unlike the board's.
+    const TEST_CONFIG: &str = r#"
+        rate_hz = 5000.0
+        channel = [
+            { name = "vel_des_x", unit = "m/s" }, { name = "vel_des_y", unit = "m/s" },
+            { name = "skin_accel", unit = "m/s^2" }, { name = "force_x", unit = "N" },
+            { name = "acc_des_x", unit = "m/s^2" }, { name = "acc_des_y", unit = "m/s^2" },
+            { name = "pos_err_x", unit = "m" }, { name = "pos_err_y", unit = "m" },
+        ]
+        feature = [
+            { name = "push", stage = { raw = { input = "force_x" } } },
+            { name = "speed", stage = { magnitude = { of = ["vel_des_x", "vel_des_y"] } } },
+            { name = "err", stage = { raw = { input = "pos_err_x" } } },
+            { name = "vib", stage = { abs = { input = "skin_accel" } } },
+            { name = "acc", stage = { magnitude = { of = ["acc_des_x", "acc_des_y"] } } },
+        ]
+        [[event]]
+        name = "press"
+        context = [{ feature = "speed", cdf = { sigmoid = { low = 0.002, high = 0.008 } } }]
+        sensor = [{ feature = "push", weight = 1.0, cdf = { binary = { threshold = -0.5, above = false } } }]
+        alert = { on = 0.5, off = 0.3 }
+        confirm = { on = 0.75, off = 0.5 }
+        [[event]]
+        name = "bump"
+        context = [{ feature = "acc", cdf = { bell = { center = 0.0, half_width = 2.0 } } }]
+        sensor = [
+            { feature = "vib", weight = 0.5, cdf = { binary = { threshold = 10.0, above = true } } },
+            { feature = "err", weight = 0.5, cdf = { binary = { threshold = 0.001, above = true } } },
+        ]
+        alert = { on = 0.5, off = 0.3 }
+        confirm = { on = 0.75, off = 0.5 }
+        [[phase]]
+        name = "approach"
+        events = ["press", "bump"]
+        [[phase]]
+        name = "hold"
+        events = ["bump"]
+    "#;
+
+    const PRESS: u8 = 0b01;
+    const BUMP: u8 = 0b10;
+
+    fn detector() -> Detector {
+        Detector::build(&Config::from_toml(TEST_CONFIG).expect("test config")).expect("builds")
+    }
+
+    fn node() -> NodeId {
+        NodeId::new(3).unwrap()
+    }
+
+    fn params() -> EngineParams {
+        EngineParams::new(node(), ResetReason::PowerOn, 0xDEAD_BEEF)
+    }
+
+    /// An analog sample: force_x, force_y, skin_accel, stress_rate.
+    fn sample(tick: Tick, force_x: f64, skin_accel: f64) -> AdcSample {
+        let mut s = AdcSample {
+            tick,
+            ..AdcSample::default()
+        };
+        s.values[0] = Signal::from_f64(force_x);
+        s.values[2] = Signal::from_f64(skin_accel);
+        s
+    }
+
+    /// Hands a frame to the receive state as the CAN receive task does.
+    fn deliver(shared: &Shared, engine: &Engine, now: Tick, frame: CanFrame) {
+        let r = engine.receiver();
+        shared
+            .with_rx(|rx| r.receive(rx, now, frame.id().into(), frame.data()))
+            .expect("accepted");
+    }
+
+    fn context(counter: u8, vx: f64) -> CanFrame {
+        ContextMsg {
+            counter: Counter::new(counter).unwrap(),
+            vel_des: [(vx / 1e-4) as i16, 0],
+            acc_des: [0, 0],
+        }
+        .encode(node())
+        .unwrap()
+    }
+
+    fn tip_state(counter: u8, x: f64) -> CanFrame {
+        TipStateMsg {
+            counter: Counter::new(counter).unwrap(),
+            pos_err: [(x / 1e-6) as i16, 0],
+        }
+        .encode(node())
+        .unwrap()
+    }
+
+    fn phase(counter: u8, index: u8, sequence: u8) -> CanFrame {
+        PhaseMsg {
+            counter: Counter::new(counter).unwrap(),
+            phase: index,
+            sequence,
+        }
+        .encode(node())
+        .unwrap()
+    }
+
+    fn decode(frames: &TxFrames) -> Vec<Message> {
+        frames
+            .iter()
+            .map(|f| {
+                let (n, m) = Message::decode(f.id().into(), f.data()).expect("our frames decode");
+                assert_eq!(n, node());
+                m
+            })
+            .collect()
+    }
+
+    fn events(frames: &TxFrames) -> Vec<EventMsg> {
+        decode(frames)
+            .into_iter()
+            .filter_map(|m| match m {
+                Message::Event(e) => Some(e),
+                _ => None,
+            })
+            .collect()
+    }
+
+    /// Fresh context (5 cm/s) and tip state (no error) at `now`.
+    fn fresh(shared: &Shared, e: &Engine, now: Tick, counter: u8) {
+        deliver(shared, e, now, context(counter, 0.05));
+        deliver(shared, e, now, tip_state(counter, 0.0));
+    }
+
+    #[test]
+    fn channels_map_by_name() {
+        let d = detector();
+        let m = ChannelMap::resolve(&d);
+        assert_eq!(m.adc, [Some(3), None, Some(2), None]);
+        assert_eq!(m.context, [Some(0), Some(1), Some(4), Some(5)]);
+        assert_eq!(m.tip_state, [Some(6), Some(7)]);
+        assert_eq!(m.context_mask(), 0b11_0011);
+        assert_eq!(m.tip_state_mask(), 0b1100_0000);
+    }
+
+    #[test]
+    fn the_embedded_configuration_maps_every_channel() {
+        let d = boot::load_detector().unwrap();
+        let m = ChannelMap::resolve(&d);
+        let fed = m.adc.iter().chain(&m.context).chain(&m.tip_state).flatten().count();
+        assert_eq!(fed, d.channels().len(), "build.rs refuses channels nothing feeds");
+        let mut e = Engine::new(&d, params()).unwrap();
+        let r = e.tick(&sample(0, 0.0, 0.0), &Shared::new(), &Health::default());
+        assert!(r.output.decisions.is_empty());
+        assert!(r.heartbeat);
+    }
+
+    #[test]
+    fn without_context_the_events_are_unjudgeable_and_the_heartbeat_says_why() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        let r = e.tick(&sample(0, -1.0, 50.0), &shared, &Health::default());
+        assert_eq!(r.output.evaluated, PRESS | BUMP);
+        assert_eq!(r.output.unjudgeable, PRESS | BUMP);
+        assert!(r.output.decisions.is_empty(), "no event is invented");
+        // The first tick sends the stream and the heartbeat at once.
+        assert!(r.heartbeat);
+        let (reset, faults) = decode(&r.frames)
+            .iter()
+            .find_map(|m| match m {
+                Message::Status(StatusPage::Health { reset, faults, .. }) => Some((*reset, *faults)),
+                _ => None,
+            })
+            .expect("a health page");
+        assert_eq!(reset, ResetReason::PowerOn);
+        assert!(faults.contains(FaultFlags::CONTEXT_STALE | FaultFlags::TIP_STATE_STALE));
+        assert!(faults.contains(FaultFlags::PHASE_STALE));
+        assert!(!faults.contains(FaultFlags::SENSOR_FAULT));
+    }
+
+    #[test]
+    fn a_decision_goes_out_in_the_same_tick_ahead_of_everything_else() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        fresh(&shared, &e, 0, 0);
+        let r = e.tick(&sample(0, 0.0, 0.0), &shared, &Health::default());
+        assert!(r.output.decisions.is_empty());
+        let r = e.tick(&sample(1, -1.0, 0.0), &shared, &Health::default());
+        let ev = events(&r.frames);
+        assert_eq!(ev.len(), 2, "alert and confirm together: {ev:?}");
+        assert!(ev.iter().all(|m| m.event == d.event("press").unwrap() && m.tick == 1));
+        assert_eq!(ev.iter().map(|m| m.level).collect::<Vec<_>>(), [Level::Alert, Level::Confirm]);
+        // Event frames lead the tick's frames.
+        let first = decode(&r.frames);
+        assert!(matches!(first[0], Message::Event(_)) && matches!(first[1], Message::Event(_)));
+    }
+
+    #[test]
+    fn stale_context_makes_its_events_unjudgeable_until_fresh_again() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        fresh(&shared, &e, 0, 0);
+        // 20 ms at 5 kHz = 100 ticks: fresh up to an age of 100 ticks.
+        let r = e.tick(&sample(100, -1.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, 0);
+        let r = e.tick(&sample(101, -1.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, PRESS | BUMP);
+        assert!(e.status().faults.contains(FaultFlags::CONTEXT_STALE));
+        fresh(&shared, &e, 150, 1);
+        let r = e.tick(&sample(151, -1.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, 0);
+        assert!(!e.status().faults.contains(FaultFlags::CONTEXT_STALE));
+        // Context and tip state each went stale once.
+        assert_eq!(shared.with_rx(|rx| rx.counts().stale_episodes()), 2);
+    }
+
+    #[test]
+    fn a_stale_tip_state_only_degrades_the_events_that_read_it() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        deliver(&shared, &e, 0, context(0, 0.05));
+        let r = e.tick(&sample(1, 0.0, 0.0), &shared, &Health::default());
+        // bump reads pos_err_x in one of its two sensor terms.
+        assert_eq!((r.output.unjudgeable, r.output.degraded), (0, BUMP));
+    }
+
+    #[test]
+    fn a_stuck_adc_channel_degrades_or_stops_the_events_that_read_it() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        fresh(&shared, &e, 0, 0);
+        let mut s = sample(1, -1.0, 50.0);
+        s.faults = 0b0100; // skin_accel: one of bump's two sensor terms
+        let r = e.tick(&s, &shared, &Health::default());
+        assert_eq!((r.output.unjudgeable, r.output.degraded), (0, BUMP));
+        assert!(e.status().faults.contains(FaultFlags::SENSOR_FAULT));
+        s.faults = 0b0001; // force_x: press's only sensor term
+        let r = e.tick(&s, &shared, &Health::default());
+        assert_eq!((r.output.unjudgeable, r.output.degraded), (PRESS, 0));
+        assert!(r.output.decisions.iter().all(|d| d.event != e.detector.event("press").unwrap()));
+        // A channel the configuration does not read (force_y) changes nothing but the flag.
+        s.faults = 0b0010;
+        let r = e.tick(&s, &shared, &Health::default());
+        assert_eq!((r.output.unjudgeable, r.output.degraded), (0, 0));
+        assert!(e.status().faults.contains(FaultFlags::SENSOR_FAULT));
+    }
+
+    #[test]
+    fn the_controllers_phase_is_followed() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        fresh(&shared, &e, 0, 0);
+        deliver(&shared, &e, 0, phase(0, 1, 7));
+        let r = e.tick(&sample(1, -1.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.evaluated, BUMP);
+        assert_eq!(e.state().phase().index(), 1);
+        assert_eq!((e.status().phase, e.status().phase_seq), (Some(1), 7));
+        assert!(!e.status().faults.contains(FaultFlags::PHASE_STALE));
+        deliver(&shared, &e, 2, phase(1, 0, 8));
+        let r = e.tick(&sample(2, -1.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.evaluated, PRESS | BUMP);
+        assert!(!events(&r.frames).is_empty(), "press judged again in its phase");
+    }
+
+    #[test]
+    fn health_reaches_the_heartbeat() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        let health = Health {
+            overruns: 3,
+            worst_tick: 2_345,
+            bus_errors: 2,
+            tx_dropped: 5,
+            latched: FaultFlags::OVERRUN | FaultFlags::TX_DROPPED,
+            sensor_fault: true,
+        };
+        let (mut timing, mut faults, mut config, mut beats) = (None, None, None, 0);
+        // Pages 1..=5 come round once every five heartbeats (50 ms each).
+        for t in 0..(5 * 250 + 1) {
+            let r = e.tick(&sample(t, 0.0, 0.0), &shared, &health);
+            beats += usize::from(r.heartbeat);
+            for m in decode(&r.frames) {
+                match m {
+                    Message::Status(StatusPage::Health { faults: f, .. }) => faults = Some(f),
+                    Message::Status(p @ StatusPage::Timing { .. }) => timing = Some(p),
+                    Message::Status(p @ StatusPage::Config { .. }) => config = Some(p),
+                    _ => {}
+                }
+            }
+        }
+        assert_eq!(beats, 6);
+        let f = faults.unwrap();
+        assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT));
+        assert!(!f.contains(FaultFlags::BUS_ERROR));
+        assert!(matches!(
+            timing,
+            Some(StatusPage::Timing { overruns: 3, worst_tick: 2_345, tick_rate_hz: 5000, .. })
+        ));
+        assert!(matches!(
+            config,
+            Some(StatusPage::Config { checksum: 0xDEAD_BEEF, tx_dropped: 5 })
+        ));
+    }
+
+    #[test]
+    fn timeouts_convert_to_ticks() {
+        assert_eq!(ms_to_ticks(20, 5000), 100);
+        assert_eq!(ms_to_ticks(1, 1500), 2);
+        assert_eq!(ms_to_ticks(0, 5000), 1);
+        assert_eq!(ms_to_ticks(u32::MAX, 5000), u32::MAX.div_ceil(1000));
+    }
+}

@@ -1,0 +1,490 @@
+//! The board binary: clocks, peripherals and the embassy tasks around the lib.
+//!
+//! Tasks, each owning its peripheral and talking through the queues and [`Shared`]:
+//! - `sampler`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
+//!   delivers them a block at a time; calibrated samples go to the detector's queue;
+//! - `detector`: one [`Engine::tick`] per sample, timed with the DWT cycle counter;
+//!   its frames go to the CAN transmit queue;
+//! - `temperature`: the TMP117 over I2C2, four times a second;
+//! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
+//! - `watchdog`: refreshes the IWDG while the sampler and the detector are alive.
+//!
+//! Everything worth testing lives in the lib; this file is wiring.
+
+#![no_std]
+#![no_main]
+
+use core::sync::atomic::Ordering;
+
+use cortex_m::peripheral::DWT;
+use cortex_m_rt::entry;
+use defmt::{info, warn};
+use embassy_executor::{Executor, Spawner};
+use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
+use embassy_stm32::can::{self, CanConfigurator, CanRx, CanTx, Properties};
+use embassy_stm32::i2c::{self, I2c, Master};
+use embassy_stm32::mode::Async;
+use embassy_stm32::peripherals::{ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, FDCAN1, I2C2, IWDG, TIM6};
+use embassy_stm32::time::Hertz;
+use embassy_stm32::timer::low_level::{RoundTo, Timer};
+use embassy_stm32::wdg::IndependentWatchdog;
+use embassy_stm32::{bind_interrupts, dma, pac};
+use embassy_sync::channel::Channel;
+use embassy_time::{Delay, Duration, Instant, Ticker};
+use static_cell::StaticCell;
+use {defmt_rtt as _, panic_probe as _};
+
+use detector_core::can::{CanFrame, FaultFlags, Receiver};
+use detector_core::Detector;
+use firmware::engine::{Engine, EngineParams, Health, LATCHED_FLAGS};
+use firmware::sampling::{AdcSample, BLOCK_LEN, BLOCK_SCANS, DMA_LEN, FrontEnd, SCAN_LEN, TickClock, TriggerPeriod};
+use firmware::shared::{RawMutex, Shared};
+use firmware::supervise::{BusAction, BusState, BusSupervisor, Task};
+use firmware::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
+use firmware::tmp117::{self, SensorHealth, Tmp117};
+use firmware::wiring::{CORE_CLOCK_HZ, MAX_RATE_ERROR_PPM, SAMPLE_TIMER_CLOCK_HZ};
+use firmware::{boot, calib, reset};
+
+bind_interrupts!(struct Irqs {
+    DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
+    DMA1_CHANNEL2 => dma::InterruptHandler<DMA1_CH2>;
+    DMA1_CHANNEL3 => dma::InterruptHandler<DMA1_CH3>;
+    I2C2_EV => i2c::EventInterruptHandler<I2C2>;
+    I2C2_ER => i2c::ErrorInterruptHandler<I2C2>;
+    FDCAN1_IT0 => can::IT0InterruptHandler<FDCAN1>;
+    FDCAN1_IT1 => can::IT1InterruptHandler<FDCAN1>;
+});
+
+/// Samples waiting for the detector: 16 ticks (3.2 ms at 5 kHz), three blocks of slack
+/// behind the one being processed.
+const SAMPLE_QUEUE: usize = 16;
+/// Frames waiting for the CAN controller: a whole tick's worst case, and then some.
+const TX_QUEUE: usize = 24;
+
+static SAMPLES: Channel<RawMutex, AdcSample, SAMPLE_QUEUE> = Channel::new();
+static TX_FRAMES: Channel<RawMutex, CanFrame, TX_QUEUE> = Channel::new();
+
+static EXECUTOR: StaticCell<Executor> = StaticCell::new();
+static DETECTOR: StaticCell<Detector> = StaticCell::new();
+static SHARED: StaticCell<Shared> = StaticCell::new();
+static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
+
+/// IWDG period: four missed 50 ms rounds of the watchdog task.
+const WATCHDOG_TIMEOUT_US: u32 = 200_000;
+/// How often the watchdog task looks for the critical tasks' check-ins.
+const WATCHDOG_ROUND: Duration = Duration::from_millis(50);
+/// Temperature reading period (the TMP117 converts every 250 ms).
+const TEMPERATURE_PERIOD: Duration = Duration::from_millis(250);
+/// I2C transaction timeout: a 4-byte transaction takes under 0.5 ms at 100 kHz.
+const I2C_TIMEOUT_MS: u32 = 5;
+/// The temperature sensor is faulty after this many failed readings in a row.
+const SENSOR_TRIP: u8 = 3;
+/// CAN error-state polling period.
+const CAN_SUPERVISOR_PERIOD: Duration = Duration::from_millis(2);
+/// The CAN bit rate.
+const CAN_BITRATE: u32 = 1_000_000;
+
+/// Clocks: 24 MHz crystal (the fingertip board and the NUCLEO-G474RE alike) / 6 × 85 =
+/// 340 MHz VCO; R / 2 = 170 MHz SYSCLK (boost mode); Q / 4 = 85 MHz for the FDCAN
+/// (85 time quanta per bit at 1 Mbit/s); the ADC runs from SYSCLK, divided to 42.5 MHz
+/// by the HAL.
+fn clocks() -> embassy_stm32::Config {
+    use embassy_stm32::rcc::*;
+    let mut config = embassy_stm32::Config::default();
+    config.rcc.hse = Some(Hse {
+        freq: Hertz(24_000_000),
+        mode: HseMode::Oscillator,
+    });
+    config.rcc.pll = Some(Pll {
+        source: PllSource::HSE,
+        prediv: PllPreDiv::DIV6,
+        mul: PllMul::MUL85,
+        divp: None,
+        divq: Some(PllQDiv::DIV4),
+        divr: Some(PllRDiv::DIV2),
+    });
+    config.rcc.sys = Sysclk::PLL1_R;
+    config.rcc.boost = true;
+    config.rcc.mux.fdcansel = mux::Fdcansel::PLL1_Q;
+    config.rcc.mux.adc12sel = mux::Adcsel::SYS;
+    config
+}
+
+/// Spawns a task, or stops with its name: a task that cannot start (its one pool slot
+/// taken) is a programming error found at the first boot.
+macro_rules! spawn {
+    ($spawner:expr, $task:ident($($arg:expr),* $(,)?)) => {
+        match $task($($arg),*) {
+            Ok(token) => $spawner.spawn(token),
+            Err(_) => defmt::panic!("cannot spawn task {=str}", stringify!($task)),
+        }
+    };
+}
+
+#[entry]
+fn main() -> ! {
+    let p = embassy_stm32::init(clocks());
+
+    // The reset reason, read once and cleared so the next boot reports its own.
+    let csr = pac::RCC.csr().read().0;
+    pac::RCC.csr().modify(|w| w.set_rmvf(true));
+    let reset = reset::reset_reason(csr);
+    info!(
+        "fingertip node {=u8}, reset: {=str}, config {=str} crc32 {=u32:#010x}",
+        boot::NODE_ID.get(),
+        reset.name(),
+        boot::CONFIG_SOURCE,
+        boot::CONFIG_CHECKSUM
+    );
+
+    // Keep the watchdog from firing while a debugger holds the core.
+    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+
+    // The cycle counter that times the detector's ticks.
+    let Some(mut core) = cortex_m::Peripherals::take() else {
+        defmt::panic!("core peripherals already taken");
+    };
+    core.DCB.enable_trace();
+    core.DWT.enable_cycle_counter();
+
+    // The detector, built from the embedded configuration before any task runs, while
+    // the whole stack is free (the decoded configuration is about 12 KiB).
+    let detector: &'static Detector = DETECTOR.init_with(|| match boot::load_detector() {
+        Ok(d) => d,
+        // Cannot happen: build.rs decoded and built the same bytes. (The error's text
+        // would pull core::fmt's float formatting into the image; the host tests print it.)
+        Err(_) => defmt::panic!("the embedded detector configuration was rejected"),
+    });
+    let rate = detector.rate_hz();
+    let trigger = match TriggerPeriod::new(SAMPLE_TIMER_CLOCK_HZ, rate, MAX_RATE_ERROR_PPM) {
+        Ok(t) => t,
+        Err(e) => defmt::panic!("sample rate: {}", e),
+    };
+    let rate_hz = (rate + 0.5) as u32;
+    let params = EngineParams::new(boot::NODE_ID, reset, boot::CONFIG_CHECKSUM);
+    let engine = match Engine::new(detector, params) {
+        Ok(e) => e,
+        Err(e) => defmt::panic!("engine: {}", e),
+    };
+    let receiver = engine.receiver();
+    let shared: &'static Shared = SHARED.init_with(Shared::new);
+
+    // ADC1: the four analog channels, one scan per TIM6 update, circular DMA.
+    let adc = Adc::new(p.ADC1, AdcConfig::default());
+    let sequence = [
+        (p.PA0.degrade_adc(), SampleTime::CYCLES47_5), // force_x
+        (p.PA1.degrade_adc(), SampleTime::CYCLES47_5), // force_y
+        (p.PB0.degrade_adc(), SampleTime::CYCLES47_5), // skin_accel
+        (p.PB1.degrade_adc(), SampleTime::CYCLES47_5), // stress_rate
+    ];
+    let ring = adc.into_ring_buffered(
+        p.DMA1_CH1,
+        ADC_DMA.init([0; DMA_LEN]),
+        Irqs,
+        sequence.into_iter(),
+        embassy_stm32::triggers::TIM6_TRGO,
+        embassy_stm32::adc::Exten::RISING_EDGE,
+    );
+    let timer = Timer::new(p.TIM6);
+    timer.set_period_clocks(u64::from(trigger.clocks), RoundTo::Slower);
+    // TRGO on every update event: one ADC trigger per period.
+    timer
+        .regs_basic()
+        .cr2()
+        .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
+    info!(
+        "sampling at {=u64} mHz ({=u32} timer clocks, {=u32} ppm), budget {=u32} cycles per tick",
+        trigger.actual_mhz,
+        trigger.clocks,
+        trigger.error_ppm,
+        budget_cycles(CORE_CLOCK_HZ, rate_hz)
+    );
+
+    // I2C2 for the TMP117.
+    let i2c = I2c::new(
+        p.I2C2,
+        p.PA9,
+        p.PA8,
+        p.DMA1_CH2,
+        p.DMA1_CH3,
+        Irqs,
+        i2c::Config::default(),
+    );
+    let sensor = Tmp117::new(i2c, Delay, tmp117::DEFAULT_ADDRESS, I2C_TIMEOUT_MS);
+
+    // FDCAN1, classic CAN at 1 Mbit/s. Only this node's three receive identifiers are
+    // accepted, in hardware; bus-off recovery is the supervisor's (with back-off), not
+    // the HAL's immediate one.
+    let mut can = CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs);
+    can.set_bitrate(CAN_BITRATE);
+    can.set_config(
+        can.config()
+            .set_automatic_bus_off_recovery(false)
+            .set_global_filter(can::config::GlobalFilter::reject_all()),
+    );
+    {
+        use can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
+        use detector_core::can::MessageKind;
+        let id = |k: MessageKind| k.id(boot::NODE_ID);
+        can.properties().set_standard_filter(
+            StandardFilterSlot::_0,
+            StandardFilter {
+                filter: FilterType::DedicatedDual(id(MessageKind::Phase), id(MessageKind::Context)),
+                action: Action::StoreInFifo0,
+            },
+        );
+        can.properties().set_standard_filter(
+            StandardFilterSlot::_1,
+            StandardFilter {
+                filter: FilterType::DedicatedSingle(id(MessageKind::TipState)),
+                action: Action::StoreInFifo0,
+            },
+        );
+    }
+    let (can_tx_half, can_rx_half, properties) = can.into_normal_mode().split();
+
+    let watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
+
+    let front_end = FrontEnd::new(calib::NOMINAL, rate_hz);
+    let executor = EXECUTOR.init(Executor::new());
+    executor.run(move |spawner: Spawner| {
+        spawn!(spawner, detector_task(engine, shared, rate_hz));
+        spawn!(spawner, sampler(ring, timer, front_end, TickClock::new(rate_hz), shared));
+        spawn!(spawner, temperature(sensor, shared));
+        spawn!(spawner, can_rx(can_rx_half, receiver, shared));
+        spawn!(spawner, can_tx(can_tx_half, shared));
+        spawn!(spawner, can_supervisor(properties, shared));
+        spawn!(spawner, watchdog_task(watchdog, shared));
+    })
+}
+
+/// Reads the ADC's DMA ring a block at a time, numbers the scans with ticks, calibrates
+/// them and queues them for the detector.
+#[embassy_executor::task]
+async fn sampler(
+    mut adc: RingBufferedAdc<'static, ADC1>,
+    timer: Timer<'static, TIM6>,
+    mut front_end: FrontEnd,
+    mut clock: TickClock,
+    shared: &'static Shared,
+) {
+    let mut block = [0u16; BLOCK_LEN];
+    adc.start();
+    timer.start();
+    loop {
+        match adc.read(&mut block).await {
+            Ok(_) => {
+                let first = clock.on_block(BLOCK_SCANS as u32, Instant::now().as_micros());
+                front_end.set_temperature(shared.temperature());
+                let mut tick = first;
+                for scan in block.chunks_exact(SCAN_LEN) {
+                    let mut raw = [0u16; SCAN_LEN];
+                    raw.copy_from_slice(scan);
+                    let sample = front_end.process(tick, &raw);
+                    if SAMPLES.try_send(sample).is_err() {
+                        // The detector is behind: this tick is lost, and counted.
+                        clock.on_dropped(1);
+                    }
+                    tick = tick.wrapping_add(1);
+                }
+                shared.now.store(tick.wrapping_sub(1), Ordering::Relaxed);
+                shared.counters.lost_samples.set(clock.lost());
+                shared.counters.rail_episodes.set(front_end.rail_episodes());
+                shared.liveness.check_in(Task::Sampler);
+            }
+            Err(_) => {
+                // The DMA lapped us; the ring restarts at the next aligned scan.
+                clock.on_overrun();
+                shared.counters.adc_overruns.add(1);
+                shared.latched.raise(FaultFlags::OVERRUN);
+            }
+        }
+    }
+}
+
+/// One engine tick per sample, timed; frames to the CAN queue.
+#[embassy_executor::task]
+async fn detector_task(mut engine: Engine<'static>, shared: &'static Shared, rate_hz: u32) {
+    let mut timing = TickTiming::new(budget_cycles(CORE_CLOCK_HZ, rate_hz));
+    let mut worst_tenths = 0u16;
+    let mut queue_full = 0u32;
+    let mut last_masks = (0u8, 0u8);
+    let detector = engine.detector();
+    loop {
+        let sample = SAMPLES.receive().await;
+        let start = DWT::cycle_count();
+        let counters = &shared.counters;
+        let health = Health {
+            overruns: timing.overruns(),
+            worst_tick: worst_tenths,
+            bus_errors: counters.bus_errors(),
+            tx_dropped: queue_full.saturating_add(counters.tx_lost.get()),
+            latched: shared.latched.peek(),
+            sensor_fault: shared.sensor_fault.load(Ordering::Relaxed),
+        };
+        let result = engine.tick(&sample, shared, &health);
+        for frame in result.frames.iter() {
+            if TX_FRAMES.try_send(*frame).is_err() {
+                queue_full = queue_full.saturating_add(1);
+                shared.latched.raise(FaultFlags::TX_DROPPED);
+            }
+        }
+        if result.heartbeat {
+            shared.latched.clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
+        }
+        let cycles = DWT::cycle_count().wrapping_sub(start);
+        let previous_worst = timing.worst();
+        if timing.record(cycles) {
+            shared.latched.raise(FaultFlags::OVERRUN);
+        }
+        if timing.worst() != previous_worst {
+            worst_tenths = cycles_to_tenths_us(timing.worst(), CORE_CLOCK_HZ);
+        }
+        shared.liveness.check_in(Task::Detector);
+
+        // Logs, outside the timed part.
+        let out = &result.output;
+        for d in out.decisions.iter() {
+            let name = detector.events().get(usize::from(d.event.0)).map_or("?", |n| n.as_str());
+            info!(
+                "{=str} {=str} at tick {=u32} (onset {=u32}), confidence {=u16}/32768",
+                name,
+                d.level.name(),
+                d.tick,
+                d.onset,
+                d.confidence.to_bits()
+            );
+        }
+        let masks = (out.unjudgeable, out.degraded);
+        if masks != last_masks {
+            warn!(
+                "events unjudgeable {=u8:#05b}, degraded {=u8:#05b} (faulty inputs)",
+                masks.0, masks.1
+            );
+            last_masks = masks;
+        }
+    }
+}
+
+/// Reads the TMP117 four times a second; publishes the temperature and the fault.
+#[embassy_executor::task]
+async fn temperature(mut sensor: Tmp117<I2c<'static, Async, Master>, Delay>, shared: &'static Shared) {
+    let mut health = SensorHealth::new(SENSOR_TRIP);
+    let mut ticker = Ticker::every(TEMPERATURE_PERIOD);
+    loop {
+        let was_faulty = health.is_faulty();
+        if health.needs_init() {
+            let r = sensor.init().await;
+            health.record(r.as_ref().map(|()| None));
+        } else {
+            let r = sensor.read_celsius().await;
+            health.record(r.as_ref().map(|t| Some(*t)));
+        }
+        shared.set_temperature(health.temperature());
+        shared.sensor_fault.store(health.is_faulty(), Ordering::Relaxed);
+        shared.counters.sensor_errors.set(health.errors().total());
+        shared.counters.sensor_timeouts.set(health.errors().timeout);
+        if health.is_faulty() != was_faulty {
+            if health.is_faulty() {
+                warn!("temperature sensor not answering: force drift compensation frozen");
+            } else {
+                info!("temperature sensor back");
+            }
+        }
+        ticker.next().await;
+    }
+}
+
+/// Hands every received frame to the core's receiver, stamped with the newest tick.
+#[embassy_executor::task]
+async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, shared: &'static Shared) {
+    loop {
+        match rx.read().await {
+            Ok(envelope) => {
+                let now = shared.now();
+                let frame = &envelope.frame;
+                let result = shared.with_rx(|state| receiver.receive(state, now, *frame.id(), frame.data()));
+                shared.counters.rx_frames.add(1);
+                if let Err(reason) = result {
+                    defmt::debug!("frame rejected: {=str}", reason.name());
+                }
+            }
+            Err(_) => shared.counters.rx_protocol_errors.add(1),
+        }
+    }
+}
+
+/// Sends the queued frames, in order.
+#[embassy_executor::task]
+async fn can_tx(mut tx: CanTx<'static>, shared: &'static Shared) {
+    loop {
+        let frame = TX_FRAMES.receive().await;
+        let lost = match can::Frame::new_standard(frame.id().as_raw(), frame.data()) {
+            // A lower-priority frame pending in the controller was replaced by this one.
+            Ok(f) => tx.write(&f).await.is_some(),
+            Err(_) => true,
+        };
+        if lost {
+            shared.counters.tx_lost.add(1);
+            shared.latched.raise(FaultFlags::TX_DROPPED);
+        }
+    }
+}
+
+/// Watches the controller's error state; lets it out of bus-off after a back-off.
+#[embassy_executor::task]
+async fn can_supervisor(properties: Properties, shared: &'static Shared) {
+    let mut supervisor = BusSupervisor::new();
+    let mut protocol_errors = 0u32;
+    let mut ticker = Ticker::every(CAN_SUPERVISOR_PERIOD);
+    loop {
+        let psr = pac::FDCAN1.psr().read();
+        let state = if psr.bo() {
+            BusState::BusOff
+        } else if psr.ep() {
+            BusState::ErrorPassive
+        } else {
+            BusState::ErrorActive
+        };
+        // LEC: 0 no error, 1..=6 an error since the last read, 7 no change.
+        if (1..=6).contains(&psr.lec().to_bits()) {
+            protocol_errors = protocol_errors.saturating_add(1);
+        }
+        let events = supervisor.error_events();
+        if supervisor.poll(Instant::now().as_millis(), state) == BusAction::Recover {
+            // Leave the initialization state: the FDCAN rejoins after 128 × 11
+            // recessive bits.
+            pac::FDCAN1.cccr().modify(|w| w.set_init(false));
+        }
+        if supervisor.error_events() != events {
+            shared.latched.raise(FaultFlags::BUS_ERROR);
+            warn!(
+                "CAN {}: tx errors {=u8}, rx errors {=u8}",
+                state,
+                properties.tx_error_count(),
+                properties.rx_error_count()
+            );
+        }
+        shared.counters.bus_off.set(supervisor.bus_off());
+        shared
+            .counters
+            .bus_state_events
+            .set(supervisor.error_events().saturating_add(protocol_errors));
+        ticker.next().await;
+    }
+}
+
+/// Refreshes the independent watchdog only while the critical tasks check in.
+#[embassy_executor::task]
+async fn watchdog_task(mut watchdog: IndependentWatchdog<'static, IWDG>, shared: &'static Shared) {
+    watchdog.unleash();
+    let mut ticker = Ticker::every(WATCHDOG_ROUND);
+    loop {
+        ticker.next().await;
+        if shared.liveness.round(Task::CRITICAL) {
+            watchdog.pet();
+        } else {
+            warn!("a critical task is silent: not refreshing the watchdog");
+        }
+    }
+}

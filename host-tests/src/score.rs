@@ -1,0 +1,177 @@
+//! Scoring replays against the truth: what a run detected, how fast, and the statistics
+//! over many runs that `fingertip evaluate` reports.
+
+use crate::replay::DecisionRecord;
+
+/// What a run's confirmations amount to, given the event expected.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Outcome {
+    /// The expected event was the first confirmed, at or after its onset.
+    Correct {
+        /// From the true onset to the confirmation [s].
+        latency_s: f64,
+    },
+    /// Something else was confirmed first: another event, or any event before the true
+    /// onset, or any event in a run where none is expected.
+    Wrong {
+        /// The event wrongly confirmed.
+        event: String,
+        /// When [s].
+        t_s: f64,
+    },
+    /// An event was expected and nothing was confirmed.
+    Missed,
+    /// No event expected and none confirmed.
+    QuietAsExpected,
+}
+
+impl Outcome {
+    /// Whether the run went as it should.
+    pub fn is_right(&self) -> bool {
+        matches!(self, Outcome::Correct { .. } | Outcome::QuietAsExpected)
+    }
+}
+
+/// Scores one run: `expected` is the true event and its onset [s], or `None` for a run in
+/// which nothing should be confirmed.
+pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> Outcome {
+    let first = decisions.iter().find(|d| d.is_confirm());
+    match (expected, first) {
+        (None, None) => Outcome::QuietAsExpected,
+        (Some(_), None) => Outcome::Missed,
+        (None, Some(d)) => Outcome::Wrong { event: d.event.clone(), t_s: d.t_s },
+        (Some((event, onset)), Some(d)) => {
+            if d.event == event && d.t_s >= onset {
+                Outcome::Correct { latency_s: d.t_s - onset }
+            } else {
+                Outcome::Wrong { event: d.event.clone(), t_s: d.t_s }
+            }
+        }
+    }
+}
+
+/// Latency statistics [ms].
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct Latency {
+    /// Median.
+    pub median: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// 99th percentile.
+    pub p99: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Latency {
+    /// From latencies in seconds (nearest-rank percentiles); all zero when empty.
+    pub fn from_seconds(latencies: &[f64]) -> Latency {
+        let mut ms: Vec<f64> = latencies.iter().map(|s| s * 1e3).collect();
+        ms.sort_by(f64::total_cmp);
+        let rank = |p: f64| -> f64 {
+            if ms.is_empty() {
+                return 0.0;
+            }
+            let k = ((p * ms.len() as f64).ceil() as usize).clamp(1, ms.len());
+            ms[k - 1]
+        };
+        Latency {
+            median: rank(0.5),
+            p95: rank(0.95),
+            p99: rank(0.99),
+            max: ms.last().copied().unwrap_or(0.0),
+        }
+    }
+}
+
+/// One scenario's results over many runs.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ScenarioReport {
+    /// The scenario's name.
+    pub name: String,
+    /// The event expected, or `none`.
+    pub expected: String,
+    /// Runs made.
+    pub runs: usize,
+    /// Runs that went as they should.
+    pub correct: usize,
+    /// Runs that confirmed a wrong event (or anything, where nothing was expected).
+    pub wrong: usize,
+    /// Runs that confirmed nothing although an event happened.
+    pub missed: usize,
+    /// Latency from true onset to confirmation over the correct runs [ms].
+    pub latency_ms: Latency,
+}
+
+impl ScenarioReport {
+    /// Tallies outcomes.
+    pub fn tally(name: &str, expected: Option<&str>, outcomes: &[Outcome]) -> ScenarioReport {
+        let latencies: Vec<f64> = outcomes
+            .iter()
+            .filter_map(|o| match o {
+                Outcome::Correct { latency_s } => Some(*latency_s),
+                _ => None,
+            })
+            .collect();
+        ScenarioReport {
+            name: name.to_string(),
+            expected: expected.unwrap_or("none").to_string(),
+            runs: outcomes.len(),
+            correct: outcomes.iter().filter(|o| o.is_right()).count(),
+            wrong: outcomes.iter().filter(|o| matches!(o, Outcome::Wrong { .. })).count(),
+            missed: outcomes.iter().filter(|o| matches!(o, Outcome::Missed)).count(),
+            latency_ms: Latency::from_seconds(&latencies),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn confirm(event: &str, t_s: f64) -> DecisionRecord {
+        DecisionRecord { event: event.into(), level: "confirm", confidence: 0.9, onset_s: t_s - 0.001, t_s }
+    }
+
+    #[test]
+    fn classification() {
+        let alert = DecisionRecord { level: "alert", ..confirm("link_collision", 0.0205) };
+        let runs = [confirm("contact", 0.0215)];
+        assert_eq!(classify(Some(("contact", 0.020)), &runs), Outcome::Correct { latency_s: 0.0215 - 0.020 });
+        // An alert for another event does not count; the first confirmation does.
+        assert_eq!(
+            classify(Some(("contact", 0.020)), &[alert.clone(), confirm("contact", 0.022)]),
+            Outcome::Correct { latency_s: 0.022 - 0.020 }
+        );
+        assert!(matches!(classify(Some(("contact", 0.020)), &[confirm("disturbance", 0.021)]), Outcome::Wrong { .. }));
+        // Confirming the right event before it happened is a false alarm.
+        assert!(matches!(classify(Some(("contact", 0.020)), &[confirm("contact", 0.010)]), Outcome::Wrong { .. }));
+        assert_eq!(classify(Some(("contact", 0.020)), &[alert]), Outcome::Missed);
+        assert_eq!(classify(None, &[]), Outcome::QuietAsExpected);
+        assert!(matches!(classify(None, &[confirm("contact", 0.05)]), Outcome::Wrong { .. }));
+    }
+
+    #[test]
+    fn nearest_rank_percentiles() {
+        let s: Vec<f64> = (1..=100).map(|k| k as f64 * 1e-3).collect();
+        let l = Latency::from_seconds(&s);
+        assert_eq!((l.median, l.p95, l.p99, l.max), (50.0, 95.0, 99.0, 100.0));
+        assert_eq!(Latency::from_seconds(&[]), Latency::default());
+        let one = Latency::from_seconds(&[0.002]);
+        assert_eq!((one.median, one.p99, one.max), (2.0, 2.0, 2.0));
+    }
+
+    #[test]
+    fn tally_counts_each_outcome() {
+        let outcomes = [
+            Outcome::Correct { latency_s: 0.001 },
+            Outcome::Correct { latency_s: 0.003 },
+            Outcome::Missed,
+            Outcome::Wrong { event: "x".into(), t_s: 0.0 },
+        ];
+        let r = ScenarioReport::tally("contact_hard_8", Some("contact"), &outcomes);
+        assert_eq!((r.runs, r.correct, r.wrong, r.missed), (4, 2, 1, 1));
+        assert_eq!(r.latency_ms.max, 3.0);
+        assert_eq!(ScenarioReport::tally("s", None, &[Outcome::QuietAsExpected]).correct, 1);
+    }
+}

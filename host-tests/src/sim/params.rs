@@ -1,0 +1,407 @@
+//! The simulator's parameters: nominal values (the Table 1 reproductions) and the ranges
+//! randomized runs draw from.
+//!
+//! Every parameter is declared once, below, with its unit, nominal value, range and
+//! meaning; [`all_specs`] lists them all and `docs/simulator.md` carries the same table
+//! (a test keeps the two in step). Randomized runs draw each parameter of the groups a
+//! scenario uses uniformly from its range, independently, in declaration order.
+
+use rand::{Rng, RngExt};
+
+/// One simulator parameter: its nominal value and the range randomized runs draw from.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParamSpec {
+    /// Group and name, e.g. `plant.foam_stiffness`.
+    pub group: &'static str,
+    /// The parameter's name within its group.
+    pub name: &'static str,
+    /// SI unit, or `1` for a ratio.
+    pub unit: &'static str,
+    /// The value of non-randomized runs.
+    pub nominal: f64,
+    /// The smallest value a randomized run draws.
+    pub min: f64,
+    /// The largest value a randomized run draws.
+    pub max: f64,
+    /// What the parameter is.
+    pub doc: &'static str,
+}
+
+/// A uniform draw from `[lo, hi]` (exactly `lo` when the range is empty).
+pub(crate) fn uniform<R: Rng>(rng: &mut R, lo: f64, hi: f64) -> f64 {
+    if hi > lo {
+        lo + (hi - lo) * rng.random::<f64>()
+    } else {
+        lo
+    }
+}
+
+macro_rules! param_group {
+    (
+        $(#[doc = $sdoc:literal])+
+        struct $name:ident, group $group:literal {
+            $( $(#[doc = $doc:literal])+ $field:ident: $unit:literal = $nom:expr, [$lo:expr, $hi:expr]; )+
+        }
+    ) => {
+        $(#[doc = $sdoc])+
+        #[derive(Clone, Debug, PartialEq)]
+        pub struct $name {
+            $( $(#[doc = $doc])+ pub $field: f64, )+
+        }
+
+        impl $name {
+            /// Every parameter of this group, in drawing order.
+            pub const SPECS: &'static [ParamSpec] = &[
+                $( ParamSpec {
+                    group: $group,
+                    name: stringify!($field),
+                    unit: $unit,
+                    nominal: $nom,
+                    min: $lo,
+                    max: $hi,
+                    doc: concat!($($doc),+),
+                }, )+
+            ];
+
+            /// The nominal values.
+            pub fn nominal() -> Self {
+                Self { $( $field: $nom, )+ }
+            }
+
+            /// Every parameter drawn uniformly from its range, in declaration order.
+            pub fn draw<R: Rng>(rng: &mut R) -> Self {
+                Self { $( $field: uniform(rng, $lo, $hi), )+ }
+            }
+
+            /// Nominal values, or drawn ones when `randomize` is set.
+            pub fn choose<R: Rng>(rng: &mut R, randomize: bool) -> Self {
+                if randomize { Self::draw(rng) } else { Self::nominal() }
+            }
+
+            /// `(group.name, value)` of every parameter, in declaration order.
+            pub fn values(&self) -> Vec<(String, f64)> {
+                vec![ $( (concat!($group, ".", stringify!($field)).to_string(), self.$field), )+ ]
+            }
+        }
+    };
+}
+
+param_group! {
+    /// The finger and its fingertip: masses, the foam core, the distal link's compliance,
+    /// the position controller and the drive.
+    struct Plant, group "plant" {
+        /// Effective mass, at the tip, of the proximal part of the finger (motors reflected
+        /// through the transmission and the proximal link), where the position controller
+        /// acts and which can strike an obstacle.
+        arm_mass: "kg" = 0.30, [0.25, 0.50];
+        /// Mass of the distal link below the force sensor.
+        distal_mass: "kg" = 0.05, [0.03, 0.08];
+        /// Mass of the fingertip above the force sensor (housing, electronics, foam base):
+        /// the mass whose inertia loads the force sensor in a sudden acceleration.
+        carrier_mass: "kg" = 0.030, [0.020, 0.045];
+        /// Mass of the rubber skin (with its accelerometer and stress-rate film).
+        skin_mass: "kg" = 0.002, [0.0015, 0.003];
+        /// Normal stiffness of the foam core between carrier and skin.
+        foam_stiffness: "N/m" = 4000.0, [2500.0, 6000.0];
+        /// Damping ratio of the skin-on-foam mode (its frequency is
+        /// sqrt(foam_stiffness / skin_mass) / 2 pi: 225 Hz nominal, 145 to 320 Hz).
+        foam_damping_ratio: "1" = 0.08, [0.05, 0.15];
+        /// Tangential (shear) stiffness of the foam as a fraction of its normal stiffness.
+        foam_shear_ratio: "1" = 0.5, [0.3, 0.7];
+        /// Frequency of the structural mode of the distal link and fingertip on the
+        /// finger's compliance (link bending, transmission).
+        link_frequency: "Hz" = 120.0, [80.0, 160.0];
+        /// Damping ratio of that structural mode.
+        link_damping_ratio: "1" = 0.05, [0.02, 0.08];
+        /// Bandwidth of the position controller (PD with feedforward of the commanded
+        /// acceleration, run at the controller rate on the motor-side position).
+        control_bandwidth: "Hz" = 30.0, [20.0, 50.0];
+        /// Damping ratio of the position loop.
+        control_damping_ratio: "1" = 0.8, [0.7, 1.0];
+        /// Coulomb friction of the drive, at the tip, not compensated by the controller
+        /// (proportional to speed below 1 mm/s). With the viscous friction it sets the position
+        /// error's baseline while moving: friction / (arm stiffness of the position loop).
+        arm_coulomb_friction: "N" = 0.15, [0.05, 0.3];
+        /// Viscous friction of the drive, at the tip.
+        arm_viscous_friction: "N s/m" = 1.0, [0.0, 2.0];
+        /// Amplitude of the drive's force ripple (gear mesh, cogging) while moving.
+        drive_ripple: "N" = 0.03, [0.0, 0.08];
+        /// Tip travel per ripple period (the ripple's frequency is speed / pitch).
+        ripple_pitch: "m" = 0.0005, [0.0003, 0.001];
+        /// Friction coefficient between skin and object (tangential contact force limit).
+        skin_friction: "1" = 1.0, [0.6, 1.2];
+        /// Tangential stiffness of the skin-object contact while sticking.
+        tangential_stiffness: "N/m" = 5000.0, [3000.0, 8000.0];
+    }
+}
+
+param_group! {
+    /// The sensors and their analog front ends (full scales and base noise are per channel,
+    /// see [`super::CHANNELS`]).
+    struct Sensors, group "sensors" {
+        /// Gain error of the force sensor's x axis (reading = gain x true).
+        force_x_gain: "1" = 1.0, [0.95, 1.05];
+        /// Gain error of the force sensor's y axis.
+        force_y_gain: "1" = 1.0, [0.95, 1.05];
+        /// Gain error of the skin accelerometer.
+        accel_gain: "1" = 1.0, [0.9, 1.1];
+        /// Gain error of the stress-rate sensor.
+        stress_gain: "1" = 1.0, [0.9, 1.1];
+        /// Multiplies every analog channel's base noise (see the channel table).
+        noise_scale: "1" = 1.0, [0.5, 2.0];
+        /// Amplitude of the mains hum on each analog channel, in LSB of that channel.
+        hum_lsb: "1" = 1.0, [0.0, 3.0];
+        /// Mains frequency.
+        hum_frequency: "Hz" = 50.0, [49.9, 50.1];
+        /// Residual offset of the force x axis after taring.
+        force_x_offset: "N" = 0.0, [-0.05, 0.05];
+        /// Residual offset of the force y axis after taring.
+        force_y_offset: "N" = 0.0, [-0.05, 0.05];
+        /// Offset of the accelerometer's amplifier after its AC coupling.
+        accel_offset: "m/s^2" = 0.0, [-1.0, 1.0];
+        /// Offset of the stress-rate charge amplifier.
+        stress_offset: "N/s" = 0.0, [-2.0, 2.0];
+        /// Slow (thermal) drift of the force x axis.
+        force_x_drift: "N/s" = 0.0, [-0.005, 0.005];
+        /// Slow drift of the force y axis.
+        force_y_drift: "N/s" = 0.0, [-0.005, 0.005];
+        /// Slow drift of the accelerometer's offset.
+        accel_drift: "m/s^3" = 0.0, [-0.05, 0.05];
+        /// Slow drift of the stress-rate offset.
+        stress_drift: "N/s^2" = 0.0, [-0.1, 0.1];
+        /// Corner of the accelerometer's AC coupling (first-order high-pass).
+        accel_highpass: "Hz" = 15.0, [10.0, 20.0];
+        /// Cross-axis sensitivity of the accelerometer to the skin's y acceleration.
+        accel_cross_axis: "1" = 0.03, [0.0, 0.05];
+        /// Stress-rate crosstalk from the foam's deformation (film bending) as a fraction
+        /// of the rate of the foam force: what makes the sensor not perfectly silent
+        /// without contact.
+        stress_crosstalk: "1" = 0.002, [0.0, 0.005];
+    }
+}
+
+param_group! {
+    /// The commanded approach motion and the event's timing, for the Table 1 runs.
+    struct Motion, group "motion" {
+        /// Commanded speed as a fraction of the scenario's nominal speed (8, 5 or 2 cm/s).
+        speed_factor: "1" = 1.0, [0.8, 1.2];
+        /// Angle of the commanded velocity from the pad normal x, towards y.
+        approach_angle: "rad" = 0.0, [-0.1745, 0.1745];
+        /// When the event (first contact, collision or disturbance) begins. Every Table 1
+        /// run lasts onset + 130 ms.
+        onset: "s" = 0.020, [0.015, 0.040];
+    }
+}
+
+param_group! {
+    /// A hard object: the contact stiffness of skin rubber on a rigid surface.
+    struct HardObject, group "hard_object" {
+        /// Contact stiffness (skin rubber in series with the object).
+        stiffness: "N/m" = 80_000.0, [50_000.0, 100_000.0];
+        /// Hunt-Crossley damping: contact force = stiffness x depth x (1 + damping x depth rate).
+        damping: "s/m" = 15.0, [5.0, 30.0];
+    }
+}
+
+param_group! {
+    /// A soft object (sponge, fruit).
+    struct SoftObject, group "soft_object" {
+        /// Contact stiffness.
+        stiffness: "N/m" = 2000.0, [1000.0, 3000.0];
+        /// Hunt-Crossley damping.
+        damping: "s/m" = 40.0, [20.0, 80.0];
+    }
+}
+
+param_group! {
+    /// An object resting on a table that slides when pushed (Coulomb friction).
+    struct MovableObject, group "movable_object" {
+        /// The object's mass.
+        mass: "kg" = 0.2, [0.1, 0.3];
+        /// Kinetic friction coefficient with the table (normal force mass x 9.81 m/s^2).
+        friction: "1" = 0.5, [0.3, 0.6];
+        /// Static over kinetic friction.
+        static_ratio: "1" = 1.2, [1.0, 1.4];
+        /// Contact stiffness of skin on the object.
+        stiffness: "N/m" = 50_000.0, [30_000.0, 80_000.0];
+        /// Hunt-Crossley damping of that contact.
+        damping: "s/m" = 15.0, [5.0, 30.0];
+    }
+}
+
+param_group! {
+    /// The obstacle the proximal link strikes in a link collision.
+    struct Obstacle, group "obstacle" {
+        /// Contact stiffness of link on obstacle.
+        stiffness: "N/m" = 1_000_000.0, [300_000.0, 2_000_000.0];
+        /// Hunt-Crossley damping.
+        damping: "s/m" = 10.0, [5.0, 20.0];
+    }
+}
+
+param_group! {
+    /// A large disturbance: a shock or a vibration reaching the fingertip through the
+    /// finger's structure (applied to the distal link, below the force sensor) while the
+    /// fingertip touches nothing. Randomized runs pick an impulse or a vibration burst with
+    /// equal probability and a direction within 45 degrees of +x or -x (equally likely);
+    /// nominal runs are vibration bursts against the approach (the paper's Figure 4).
+    /// Directions nearer y are not drawn: the skin accelerometer measures along x only,
+    /// and such a disturbance would show on `force_y` alone.
+    struct LargeDisturbance, group "large_disturbance" {
+        /// Peak of a half-sine force impulse.
+        impulse_peak: "N" = 6.0, [4.0, 10.0];
+        /// Duration of the impulse.
+        impulse_duration: "s" = 0.001, [0.0005, 0.0015];
+        /// Amplitude of a sinusoidal vibration burst (starting at phase zero).
+        vibration_amplitude: "N" = 2.0, [1.0, 3.0];
+        /// Frequency of the vibration (structural vibration, above the controller's band).
+        vibration_frequency: "Hz" = 200.0, [100.0, 400.0];
+        /// Duration of the vibration burst.
+        vibration_duration: "s" = 0.040, [0.010, 0.060];
+        /// Angle of the force from the nearer of +x and -x, towards y.
+        direction_offset: "rad" = 0.0, [-0.7854, 0.7854];
+    }
+}
+
+param_group! {
+    /// A small disturbance: as a large one, with smaller forces. Still well above the
+    /// sensors' noise: its skin acceleration peaks at several m/s^2 or more.
+    struct SmallDisturbance, group "small_disturbance" {
+        /// Peak of a half-sine force impulse.
+        impulse_peak: "N" = 1.5, [1.0, 3.0];
+        /// Duration of the impulse.
+        impulse_duration: "s" = 0.001, [0.0005, 0.0015];
+        /// Amplitude of a sinusoidal vibration burst (starting at phase zero).
+        vibration_amplitude: "N" = 0.5, [0.3, 0.8];
+        /// Frequency of the vibration.
+        vibration_frequency: "Hz" = 200.0, [100.0, 400.0];
+        /// Duration of the vibration burst.
+        vibration_duration: "s" = 0.040, [0.010, 0.060];
+        /// Angle of the force from the nearer of +x and -x, towards y.
+        direction_offset: "rad" = 0.0, [-0.7854, 0.7854];
+    }
+}
+
+param_group! {
+    /// A sudden commanded acceleration along the approach direction: a step of commanded
+    /// acceleration at a controller tick, held until the velocity has changed by the
+    /// chosen amount, then back to zero.
+    struct SuddenAccel, group "sudden_accel" {
+        /// The commanded acceleration.
+        amplitude: "m/s^2" = 15.0, [8.0, 25.0];
+        /// The change of commanded speed it brings.
+        velocity_change: "m/s" = 0.08, [0.05, 0.12];
+    }
+}
+
+param_group! {
+    /// Event-free motion: random point-to-point moves in the plane with trapezoidal speed
+    /// profiles and pauses; each move draws its own values from these ranges (the nominal
+    /// values are only used to describe them).
+    struct FreeMotion, group "free_motion" {
+        /// Probability that a pause (fingertip at rest) precedes a move.
+        pause_probability: "1" = 0.5, [0.5, 0.5];
+        /// Duration of a pause.
+        pause: "s" = 0.1, [0.02, 0.3];
+        /// Length of a move.
+        distance: "m" = 0.015, [0.002, 0.03];
+        /// Peak speed of a move.
+        speed: "m/s" = 0.05, [0.01, 0.10];
+        /// Acceleration of a move, drawn log-uniformly (sudden ones included).
+        acceleration: "m/s^2" = 2.0, [0.3, 25.0];
+        /// Moves stay within this distance of the start point.
+        workspace_radius: "m" = 0.04, [0.04, 0.04];
+    }
+}
+
+/// Every parameter of every group, in a stable order (plant, sensors, motion, objects,
+/// obstacle, disturbance, sudden acceleration, free motion).
+pub fn all_specs() -> Vec<ParamSpec> {
+    let mut v = Vec::new();
+    for g in [
+        Plant::SPECS,
+        Sensors::SPECS,
+        Motion::SPECS,
+        HardObject::SPECS,
+        SoftObject::SPECS,
+        MovableObject::SPECS,
+        Obstacle::SPECS,
+        LargeDisturbance::SPECS,
+        SmallDisturbance::SPECS,
+        SuddenAccel::SPECS,
+        FreeMotion::SPECS,
+    ] {
+        v.extend_from_slice(g);
+    }
+    v
+}
+
+/// The parameter table as Markdown (the one in `docs/simulator.md`).
+pub fn specs_markdown() -> String {
+    let mut s = String::from(
+        "| parameter | unit | nominal | randomized range | meaning |\n|---|---|---|---|---|\n",
+    );
+    for p in all_specs() {
+        s.push_str(&format!(
+            "| `{}.{}` | {} | {} | {} .. {} | {} |\n",
+            p.group,
+            p.name,
+            p.unit,
+            fmt_num(p.nominal),
+            fmt_num(p.min),
+            fmt_num(p.max),
+            p.doc.trim().replace("  ", " ")
+        ));
+    }
+    s
+}
+
+fn fmt_num(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    let a = v.abs();
+    if (1e-3..1e6).contains(&a) {
+        let s = format!("{v:.6}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        s.to_string()
+    } else {
+        format!("{v:e}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nominal_inside_ranges_and_names_unique() {
+        let specs = all_specs();
+        for p in &specs {
+            assert!(p.min <= p.nominal && p.nominal <= p.max, "{p:?}");
+            assert!(!p.doc.trim().is_empty(), "{p:?}");
+        }
+        for (i, p) in specs.iter().enumerate() {
+            for q in &specs[..i] {
+                assert!(
+                    (p.group, p.name) != (q.group, q.name),
+                    "duplicate {}.{}",
+                    p.group,
+                    p.name
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn draws_stay_in_range() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
+        for _ in 0..200 {
+            let p = Plant::draw(&mut rng);
+            for ((_, v), s) in p.values().iter().zip(Plant::SPECS) {
+                assert!(*v >= s.min && *v <= s.max);
+            }
+        }
+    }
+}

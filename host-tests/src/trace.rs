@@ -1,0 +1,1081 @@
+//! Trace files: the one format for simulated and recorded fingertip data.
+//!
+//! A trace is a CSV file (see `docs/trace-format.md` for the full description):
+//!
+//! ```text
+//! # scenario: contact_hard_8
+//! # rate_hz: 5000
+//! t,force_x,force_y,skin_accel,stress_rate,phase,truth
+//! 0,0.009765625,0,-0.244140625,0.9765625,approach,
+//! 0.0002,0,-0.009765625,0.48828125,0,approach,
+//! ...
+//! 0.02,-0.029296875,0,12.6953125,160.15625,approach,contact
+//! ```
+//!
+//! - Lines whose first non-blank character is `#` are comments and may appear anywhere,
+//!   before the header included. A comment of the form `# key: value` is kept as metadata.
+//! - Blank lines are ignored.
+//! - The first other line is the header: comma-separated column names, unique and
+//!   non-empty. Column `t` (time in seconds) is required.
+//! - Columns `phase` and `truth` are optional text columns; every other column is a
+//!   numeric input channel, in SI units, of any name.
+//! - Every following line is one row with exactly one cell per column. Numeric cells must
+//!   be finite decimal numbers. Cells are trimmed of surrounding blanks; quoting is not
+//!   supported, so text cells cannot hold commas.
+//! - Time increases strictly and uniformly: every step is within
+//!   [`TIME_STEP_TOLERANCE`] of the mean period. The rate is derived from it.
+//!
+//! Every error is one line naming the file, the 1-based line number in the file and the
+//! column (see [`TraceError`]).
+
+use std::fmt::Write as _;
+use std::fs;
+use std::io::{self, Write as _};
+use std::path::{Path, PathBuf};
+
+/// The name of the time column.
+pub const TIME_COLUMN: &str = "t";
+/// The name of the optional phase column.
+pub const PHASE_COLUMN: &str = "phase";
+/// The name of the optional ground-truth column.
+pub const TRUTH_COLUMN: &str = "truth";
+/// How far a time step may stray from the mean period, as a fraction of that period.
+pub const TIME_STEP_TOLERANCE: f64 = 0.01;
+
+/// Why a trace could not be read, built or written.
+///
+/// Its `Display` is always a single line naming the file and, where it applies, the
+/// 1-based line number in the file and the column.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum TraceError {
+    /// The file could not be read (missing, unreadable, not UTF-8).
+    #[error("{file}: cannot read: {source}")]
+    Read {
+        /// The file.
+        file: String,
+        /// The underlying error.
+        #[source]
+        source: io::Error,
+    },
+    /// The file could not be written; no file was left at the destination.
+    #[error("{file}: cannot write: {source}")]
+    Write {
+        /// The file.
+        file: String,
+        /// The underlying error.
+        #[source]
+        source: io::Error,
+    },
+    /// The file holds nothing but blank and comment lines.
+    #[error("{file}: empty: no header row (a trace needs a header naming its columns, `t` first)")]
+    NoHeader {
+        /// The file.
+        file: String,
+    },
+    /// The header has no `t` column.
+    #[error("{file}: line {line}: the header has no column `t` (time in seconds)")]
+    MissingTime {
+        /// The file.
+        file: String,
+        /// The header's line number (1-based).
+        line: usize,
+    },
+    /// A column name appears twice.
+    #[error("{file}: line {line}, column {column}: duplicate column name `{name}`")]
+    DuplicateColumn {
+        /// The file.
+        file: String,
+        /// The header's line number (1-based).
+        line: usize,
+        /// The 1-based position of the second occurrence.
+        column: usize,
+        /// The repeated name.
+        name: String,
+    },
+    /// A column name is empty (for example a trailing comma in the header).
+    #[error("{file}: line {line}, column {column}: empty column name")]
+    EmptyColumnName {
+        /// The file.
+        file: String,
+        /// The header's line number (1-based).
+        line: usize,
+        /// The 1-based position of the empty name.
+        column: usize,
+    },
+    /// A name, label or metadata entry holds a character the format cannot carry.
+    #[error("{file}: {what} `{text}` is not allowed: {reason}")]
+    InvalidText {
+        /// The file.
+        file: String,
+        /// What the text is (channel name, phase label, ...).
+        what: &'static str,
+        /// The offending text (escaped).
+        text: String,
+        /// Why it is rejected.
+        reason: &'static str,
+    },
+    /// The header is followed by no data row.
+    #[error("{file}: empty: no data rows after the header on line {line}")]
+    NoRows {
+        /// The file.
+        file: String,
+        /// The header's line number (1-based).
+        line: usize,
+    },
+    /// Only one data row: the sampling rate cannot be derived.
+    #[error("{file}: line {line}: only one data row; at least two are needed to derive the rate")]
+    SingleRow {
+        /// The file.
+        file: String,
+        /// The line of the only row (1-based).
+        line: usize,
+    },
+    /// A row has more or fewer cells than the header has columns.
+    #[error("{file}: line {line}: {found} cells, but the header has {expected} columns")]
+    CellCount {
+        /// The file.
+        file: String,
+        /// The row's line number (1-based).
+        line: usize,
+        /// The number of columns in the header.
+        expected: usize,
+        /// The number of cells on the row.
+        found: usize,
+    },
+    /// A cell of a numeric column is not a number.
+    #[error("{file}: line {line}, column {column} `{name}`: `{cell}` is not a number")]
+    NotANumber {
+        /// The file.
+        file: String,
+        /// The row's line number (1-based).
+        line: usize,
+        /// The 1-based column position.
+        column: usize,
+        /// The column's name.
+        name: String,
+        /// The cell as written (shortened if long).
+        cell: String,
+    },
+    /// A cell of a numeric column is NaN or infinite.
+    #[error("{file}: line {line}, column {column} `{name}`: `{cell}` is not finite (NaN and infinities are not allowed)")]
+    NotFinite {
+        /// The file.
+        file: String,
+        /// The row's line number (1-based).
+        line: usize,
+        /// The 1-based column position.
+        column: usize,
+        /// The column's name.
+        name: String,
+        /// The cell as written.
+        cell: String,
+    },
+    /// Time does not increase from one row to the next.
+    #[error("{file}: line {line}, column {column} `t`: time {t} s does not increase (previous row: {previous} s)")]
+    TimeNotIncreasing {
+        /// The file.
+        file: String,
+        /// The row's line number (1-based).
+        line: usize,
+        /// The 1-based position of the `t` column.
+        column: usize,
+        /// The time on this row.
+        t: f64,
+        /// The time on the previous row.
+        previous: f64,
+    },
+    /// A time step differs from the mean period by more than [`TIME_STEP_TOLERANCE`].
+    #[error("{file}: line {line}, column {column} `t`: time step {step} s differs from the trace's mean period {period} s by more than 1% (time must be uniform)")]
+    TimeNotUniform {
+        /// The file.
+        file: String,
+        /// The row's line number (1-based).
+        line: usize,
+        /// The 1-based position of the `t` column.
+        column: usize,
+        /// The step from the previous row to this one.
+        step: f64,
+        /// The mean period over the whole trace.
+        period: f64,
+    },
+    /// A column given to a constructor does not have one value per time sample.
+    #[error("{file}: column `{name}` has {found} values, but time has {expected}")]
+    LengthMismatch {
+        /// The trace's name.
+        file: String,
+        /// The column.
+        name: String,
+        /// The number of time samples.
+        expected: usize,
+        /// The number of values in the column.
+        found: usize,
+    },
+}
+
+/// A trace: uniformly sampled named channels, with optional phase and ground truth.
+///
+/// Built by [`Trace::parse`], [`Trace::read`] or [`Trace::from_columns`], it always holds at
+/// least two rows, strictly increasing uniform time, finite values, unique channel names,
+/// and one value per row in every column.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Trace {
+    name: String,
+    t: Vec<f64>,
+    rate_hz: f64,
+    channel_names: Vec<String>,
+    data: Vec<Vec<f64>>,
+    phase: Option<Labels>,
+    truth: Option<Labels>,
+    metadata: Vec<(String, String)>,
+}
+
+/// A text column (phase or truth): one label per row, stored compactly as an index into
+/// the distinct labels (a trace has few distinct phases and events but many rows).
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Labels {
+    distinct: Vec<String>,
+    rows: Vec<u32>,
+}
+
+impl Labels {
+    /// An empty column.
+    pub fn new() -> Labels {
+        Labels::default()
+    }
+
+    /// `n` rows of the same label.
+    pub fn uniform(label: &str, n: usize) -> Labels {
+        Labels {
+            distinct: vec![label.to_string()],
+            rows: vec![0; n],
+        }
+    }
+
+    /// `before` on rows `..switch`, `after` on rows `switch..n`.
+    pub fn switch_at(before: &str, after: &str, switch: usize, n: usize) -> Labels {
+        let mut l = Labels::new();
+        for row in 0..n {
+            l.push(if row < switch { before } else { after });
+        }
+        l
+    }
+
+    /// Appends a row.
+    pub fn push(&mut self, label: &str) {
+        let i = match self.distinct.iter().rposition(|d| d == label) {
+            Some(i) => i,
+            None => {
+                self.distinct.push(label.to_string());
+                self.distinct.len() - 1
+            }
+        };
+        // A trace cannot hold 2^32 distinct labels in memory anyway.
+        self.rows.push(i as u32);
+    }
+
+    /// The number of rows.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// True when there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The label of a row (`None` past the end).
+    pub fn get(&self, row: usize) -> Option<&str> {
+        self.rows.get(row).map(|&i| self.distinct[i as usize].as_str())
+    }
+
+    /// The labels row by row.
+    pub fn iter(&self) -> impl Iterator<Item = &String> + '_ {
+        self.rows.iter().map(|&i| &self.distinct[i as usize])
+    }
+
+    /// The distinct labels, in order of first appearance.
+    pub fn distinct(&self) -> &[String] {
+        &self.distinct
+    }
+}
+
+impl<S: AsRef<str>> FromIterator<S> for Labels {
+    fn from_iter<I: IntoIterator<Item = S>>(iter: I) -> Labels {
+        let mut l = Labels::new();
+        for s in iter {
+            l.push(s.as_ref());
+        }
+        l
+    }
+}
+
+impl Trace {
+    /// Builds a trace from a time column and named channel columns.
+    ///
+    /// `name` is used in error messages (a file name or a scenario name). Checks everything
+    /// [`Trace::parse`] checks; lines in errors are those the trace would have when written
+    /// without metadata (header on line 1).
+    pub fn from_columns(
+        name: &str,
+        t: Vec<f64>,
+        channels: Vec<(String, Vec<f64>)>,
+    ) -> Result<Trace, TraceError> {
+        let mut seen: Vec<&str> = vec![TIME_COLUMN];
+        for (i, (ch, values)) in channels.iter().enumerate() {
+            check_column_name(name, ch)?;
+            if ch == PHASE_COLUMN || ch == TRUTH_COLUMN || seen.contains(&ch.as_str()) {
+                return Err(TraceError::DuplicateColumn {
+                    file: name.to_string(),
+                    line: 1,
+                    column: i + 2,
+                    name: ch.clone(),
+                });
+            }
+            seen.push(ch);
+            if values.len() != t.len() {
+                return Err(TraceError::LengthMismatch {
+                    file: name.to_string(),
+                    name: ch.clone(),
+                    expected: t.len(),
+                    found: values.len(),
+                });
+            }
+            if let Some(row) = values.iter().position(|v| !v.is_finite()) {
+                return Err(TraceError::NotFinite {
+                    file: name.to_string(),
+                    line: row + 2,
+                    column: i + 2,
+                    name: ch.clone(),
+                    cell: values[row].to_string(),
+                });
+            }
+        }
+        let rate_hz = check_time(name, &t, |row| row + 2, 1)?;
+        let (channel_names, data) = channels.into_iter().unzip();
+        Ok(Trace {
+            name: name.to_string(),
+            t,
+            rate_hz,
+            channel_names,
+            data,
+            phase: None,
+            truth: None,
+            metadata: Vec::new(),
+        })
+    }
+
+    /// Adds a phase column (one phase name per row).
+    pub fn with_phase(mut self, phase: Labels) -> Result<Trace, TraceError> {
+        self.check_labels(PHASE_COLUMN, &phase, "phase label")?;
+        self.phase = Some(phase);
+        Ok(self)
+    }
+
+    /// Adds a truth column (the true event's name from its onset on, empty otherwise).
+    pub fn with_truth(mut self, truth: Labels) -> Result<Trace, TraceError> {
+        self.check_labels(TRUTH_COLUMN, &truth, "truth label")?;
+        self.truth = Some(truth);
+        Ok(self)
+    }
+
+    /// Adds a metadata entry, written as a `# key: value` comment before the header.
+    ///
+    /// The key must be non-empty and hold no blank, `:` or `,`; the value may not hold a
+    /// line break and is trimmed.
+    pub fn push_metadata(&mut self, key: &str, value: &str) -> Result<(), TraceError> {
+        if key.is_empty()
+            || key.starts_with('#')
+            || key.chars().any(|c| c.is_whitespace() || c == ':' || c == ',')
+        {
+            return Err(TraceError::InvalidText {
+                file: self.name.clone(),
+                what: "metadata key",
+                text: key.escape_debug().to_string(),
+                reason: "a key is non-empty and holds no blank, `#` first, `:` or `,`",
+            });
+        }
+        if value.contains(['\n', '\r']) {
+            return Err(TraceError::InvalidText {
+                file: self.name.clone(),
+                what: "metadata value",
+                text: value.escape_debug().to_string(),
+                reason: "a value holds no line break",
+            });
+        }
+        self.metadata
+            .push((key.to_string(), value.trim().to_string()));
+        Ok(())
+    }
+
+    /// Reads a trace file.
+    pub fn read(path: impl AsRef<Path>) -> Result<Trace, TraceError> {
+        let path = path.as_ref();
+        let file = path.display().to_string();
+        let text = fs::read_to_string(path).map_err(|source| TraceError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        Trace::parse(&text, &file)
+    }
+
+    /// Parses trace text; `name` (usually the file name) prefixes every error message.
+    pub fn parse(text: &str, name: &str) -> Result<Trace, TraceError> {
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let file = || name.to_string();
+        let mut metadata = Vec::new();
+        let mut header: Option<(usize, Vec<String>)> = None;
+        let mut rows: Vec<(usize, &str)> = Vec::new();
+        for (i, raw) in text.lines().enumerate() {
+            let line_no = i + 1;
+            let line = raw.trim();
+            if line.is_empty() {
+                continue;
+            }
+            if let Some(comment) = line.strip_prefix('#') {
+                if let Some(kv) = parse_metadata(comment) {
+                    metadata.push(kv);
+                }
+                continue;
+            }
+            if header.is_none() {
+                header = Some((line_no, line.split(',').map(|s| s.trim().to_string()).collect()));
+            } else {
+                rows.push((line_no, line));
+            }
+        }
+        let Some((header_line, columns)) = header else {
+            return Err(TraceError::NoHeader { file: file() });
+        };
+        for (i, col) in columns.iter().enumerate() {
+            if col.is_empty() {
+                return Err(TraceError::EmptyColumnName {
+                    file: file(),
+                    line: header_line,
+                    column: i + 1,
+                });
+            }
+            if columns[..i].contains(col) {
+                return Err(TraceError::DuplicateColumn {
+                    file: file(),
+                    line: header_line,
+                    column: i + 1,
+                    name: col.clone(),
+                });
+            }
+        }
+        let Some(t_col) = columns.iter().position(|c| c == TIME_COLUMN) else {
+            return Err(TraceError::MissingTime {
+                file: file(),
+                line: header_line,
+            });
+        };
+        let phase_col = columns.iter().position(|c| c == PHASE_COLUMN);
+        let truth_col = columns.iter().position(|c| c == TRUTH_COLUMN);
+        if rows.is_empty() {
+            return Err(TraceError::NoRows {
+                file: file(),
+                line: header_line,
+            });
+        }
+        let n = rows.len();
+        let numeric: Vec<usize> = (0..columns.len())
+            .filter(|&c| Some(c) != phase_col && Some(c) != truth_col && c != t_col)
+            .collect();
+        let mut t = Vec::with_capacity(n);
+        let mut data: Vec<Vec<f64>> = numeric.iter().map(|_| Vec::with_capacity(n)).collect();
+        let mut phase = phase_col.map(|_| Labels::new());
+        let mut truth = truth_col.map(|_| Labels::new());
+        let mut cells: Vec<&str> = Vec::with_capacity(columns.len());
+        for &(line, row) in &rows {
+            cells.clear();
+            cells.extend(row.split(',').map(str::trim));
+            if cells.len() != columns.len() {
+                return Err(TraceError::CellCount {
+                    file: file(),
+                    line,
+                    expected: columns.len(),
+                    found: cells.len(),
+                });
+            }
+            t.push(parse_number(name, line, t_col, &columns[t_col], cells[t_col])?);
+            for (slot, &c) in data.iter_mut().zip(&numeric) {
+                slot.push(parse_number(name, line, c, &columns[c], cells[c])?);
+            }
+            if let (Some(p), Some(c)) = (phase.as_mut(), phase_col) {
+                p.push(cells[c]);
+            }
+            if let (Some(p), Some(c)) = (truth.as_mut(), truth_col) {
+                p.push(cells[c]);
+            }
+        }
+        if n == 1 {
+            return Err(TraceError::SingleRow {
+                file: file(),
+                line: rows[0].0,
+            });
+        }
+        let rate_hz = check_time(name, &t, |row| rows[row].0, t_col + 1)?;
+        Ok(Trace {
+            name: name.to_string(),
+            t,
+            rate_hz,
+            channel_names: numeric.iter().map(|&c| columns[c].clone()).collect(),
+            data,
+            phase,
+            truth,
+            metadata,
+        })
+    }
+
+    /// Writes the trace as CSV text: metadata comments, header, rows.
+    ///
+    /// Numbers are written in the shortest form that reads back to the same `f64`, so
+    /// writing and reading again gives an equal trace (up to its name).
+    pub fn to_csv(&self) -> String {
+        let mut out = String::with_capacity(self.len() * (12 * (self.data.len() + 1) + 16));
+        for (k, v) in &self.metadata {
+            // Writing to a String cannot fail.
+            let _ = writeln!(out, "# {k}: {v}");
+        }
+        out.push_str(TIME_COLUMN);
+        for name in &self.channel_names {
+            out.push(',');
+            out.push_str(name);
+        }
+        if self.phase.is_some() {
+            out.push(',');
+            out.push_str(PHASE_COLUMN);
+        }
+        if self.truth.is_some() {
+            out.push(',');
+            out.push_str(TRUTH_COLUMN);
+        }
+        out.push('\n');
+        for row in 0..self.len() {
+            let _ = write!(out, "{}", self.t[row]);
+            for col in &self.data {
+                let _ = write!(out, ",{}", col[row]);
+            }
+            if let Some(p) = &self.phase {
+                out.push(',');
+                out.push_str(p.get(row).unwrap_or(""));
+            }
+            if let Some(p) = &self.truth {
+                out.push(',');
+                out.push_str(p.get(row).unwrap_or(""));
+            }
+            out.push('\n');
+        }
+        out
+    }
+
+    /// Writes the trace to a file, atomically: the text goes to a temporary file beside
+    /// the destination, is flushed to disk, and is then renamed over the destination. On
+    /// any failure the temporary file is removed and the destination is left untouched.
+    pub fn write(&self, path: impl AsRef<Path>) -> Result<(), TraceError> {
+        let path = path.as_ref();
+        write_atomically(path, self.to_csv().as_bytes()).map_err(|source| TraceError::Write {
+            file: path.display().to_string(),
+            source,
+        })
+    }
+
+    /// The name errors are reported under (the file name for a trace that was read).
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Renames the trace (the name errors are reported under).
+    pub fn set_name(&mut self, name: &str) {
+        self.name = name.to_string();
+    }
+
+    /// The number of rows (always at least 2).
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Always false: a trace has at least two rows. Present for API symmetry with `len`.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// The sampling rate in Hz, derived from the time column: (rows - 1) / (t_last - t_first).
+    pub fn rate_hz(&self) -> f64 {
+        self.rate_hz
+    }
+
+    /// The time column in seconds.
+    pub fn time(&self) -> &[f64] {
+        &self.t
+    }
+
+    /// The names of the numeric input channels, in file order (not `t`, `phase`, `truth`).
+    pub fn channel_names(&self) -> &[String] {
+        &self.channel_names
+    }
+
+    /// A numeric column by name: an input channel, or `t` for time.
+    pub fn column(&self, name: &str) -> Option<&[f64]> {
+        if name == TIME_COLUMN {
+            return Some(&self.t);
+        }
+        self.channel_names
+            .iter()
+            .position(|c| c == name)
+            .map(|i| self.data[i].as_slice())
+    }
+
+    /// The phase column, if the trace has one.
+    pub fn phase(&self) -> Option<&Labels> {
+        self.phase.as_ref()
+    }
+
+    /// The truth column, if the trace has one.
+    pub fn truth(&self) -> Option<&Labels> {
+        self.truth.as_ref()
+    }
+
+    /// The first row whose truth cell is not empty, with the event named there.
+    pub fn truth_onset(&self) -> Option<(usize, &str)> {
+        self.truth
+            .as_ref()?
+            .iter()
+            .enumerate()
+            .find(|(_, s)| !s.is_empty())
+            .map(|(i, s)| (i, s.as_str()))
+    }
+
+    /// The metadata entries (`# key: value` comments), in file order.
+    pub fn metadata(&self) -> &[(String, String)] {
+        &self.metadata
+    }
+
+    /// The value of the first metadata entry with this key.
+    pub fn meta(&self, key: &str) -> Option<&str> {
+        self.metadata
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+
+    fn check_labels(
+        &self,
+        column: &str,
+        labels: &Labels,
+        what: &'static str,
+    ) -> Result<(), TraceError> {
+        if labels.len() != self.len() {
+            return Err(TraceError::LengthMismatch {
+                file: self.name.clone(),
+                name: column.to_string(),
+                expected: self.len(),
+                found: labels.len(),
+            });
+        }
+        for label in labels.distinct() {
+            if label.contains([',', '\n', '\r']) || label.trim() != label {
+                return Err(TraceError::InvalidText {
+                    file: self.name.clone(),
+                    what,
+                    text: label.escape_debug().to_string(),
+                    reason: "a label holds no comma or line break and no blank at either end",
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Checks a channel name given to a constructor.
+fn check_column_name(file: &str, name: &str) -> Result<(), TraceError> {
+    if name.is_empty()
+        || name.starts_with('#')
+        || name.contains([',', '\n', '\r'])
+        || name.trim() != name
+    {
+        return Err(TraceError::InvalidText {
+            file: file.to_string(),
+            what: "channel name",
+            text: name.escape_debug().to_string(),
+            reason: "a name is non-empty, holds no comma or line break, does not start with `#` and has no blank at either end",
+        });
+    }
+    Ok(())
+}
+
+/// `key: value` from the text of a comment, when it has that form (key without blanks).
+fn parse_metadata(comment: &str) -> Option<(String, String)> {
+    let (key, value) = comment.split_once(':')?;
+    let key = key.trim();
+    if key.is_empty() || key.chars().any(|c| c.is_whitespace() || c == ',') {
+        return None;
+    }
+    Some((key.to_string(), value.trim().to_string()))
+}
+
+fn parse_number(
+    file: &str,
+    line: usize,
+    col: usize,
+    name: &str,
+    cell: &str,
+) -> Result<f64, TraceError> {
+    match cell.parse::<f64>() {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(TraceError::NotFinite {
+            file: file.to_string(),
+            line,
+            column: col + 1,
+            name: name.to_string(),
+            cell: cell.to_string(),
+        }),
+        Err(_) => Err(TraceError::NotANumber {
+            file: file.to_string(),
+            line,
+            column: col + 1,
+            name: name.to_string(),
+            cell: shorten(cell),
+        }),
+    }
+}
+
+fn shorten(cell: &str) -> String {
+    const MAX: usize = 40;
+    if cell.chars().count() <= MAX {
+        cell.escape_debug().to_string()
+    } else {
+        let head: String = cell.chars().take(MAX).collect();
+        format!("{}...", head.escape_debug())
+    }
+}
+
+/// Checks that time is finite, strictly increasing and uniform; returns the rate in Hz.
+/// `line_of(row)` gives the file line of a row for messages, `column` the 1-based column.
+fn check_time(
+    file: &str,
+    t: &[f64],
+    line_of: impl Fn(usize) -> usize,
+    column: usize,
+) -> Result<f64, TraceError> {
+    if t.is_empty() {
+        return Err(TraceError::NoRows {
+            file: file.to_string(),
+            line: 1,
+        });
+    }
+    if t.len() == 1 {
+        return Err(TraceError::SingleRow {
+            file: file.to_string(),
+            line: line_of(0),
+        });
+    }
+    for (row, v) in t.iter().enumerate() {
+        if !v.is_finite() {
+            return Err(TraceError::NotFinite {
+                file: file.to_string(),
+                line: line_of(row),
+                column,
+                name: TIME_COLUMN.to_string(),
+                cell: v.to_string(),
+            });
+        }
+    }
+    for row in 1..t.len() {
+        if t[row] <= t[row - 1] {
+            return Err(TraceError::TimeNotIncreasing {
+                file: file.to_string(),
+                line: line_of(row),
+                column,
+                t: t[row],
+                previous: t[row - 1],
+            });
+        }
+    }
+    let period = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+    for row in 1..t.len() {
+        let step = t[row] - t[row - 1];
+        if (step - period).abs() > TIME_STEP_TOLERANCE * period {
+            return Err(TraceError::TimeNotUniform {
+                file: file.to_string(),
+                line: line_of(row),
+                column,
+                step,
+                period,
+            });
+        }
+    }
+    Ok(1.0 / period)
+}
+
+/// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it to `path`.
+fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
+    let file_name = path
+        .file_name()
+        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "not a file path"))?;
+    let mut tmp_name = std::ffi::OsString::from(".");
+    tmp_name.push(file_name);
+    tmp_name.push(format!(".tmp-{}", std::process::id()));
+    let tmp: PathBuf = path.with_file_name(tmp_name);
+    let result = (|| {
+        let mut f = fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        drop(f);
+        fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = fs::remove_file(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Trace, TraceError> {
+        Trace::parse(text, "test.csv")
+    }
+
+    fn message(text: &str) -> String {
+        let e = parse(text).expect_err("should fail");
+        let m = e.to_string();
+        assert!(!m.contains('\n'), "one line: {m}");
+        assert!(m.starts_with("test.csv: "), "names the file: {m}");
+        m
+    }
+
+    const GOOD: &str = "# scenario: contact_hard_8\n\
+                        # a plain comment\n\
+                        t,force_x,phase,truth\n\
+                        0,1.5,approach,\n\
+                        # comment between rows\n\
+                        0.0002,-2,approach,\n\
+                        \n\
+                        0.0004,3e-3,approach,contact\n\
+                        0.0006, 4 ,approach,contact\n";
+
+    #[test]
+    fn parses_a_good_trace() {
+        let tr = parse(GOOD).unwrap();
+        assert_eq!(tr.len(), 4);
+        assert!((tr.rate_hz() - 5000.0).abs() < 1e-6);
+        assert_eq!(tr.channel_names(), ["force_x"]);
+        assert_eq!(tr.column("force_x").unwrap(), [1.5, -2.0, 3e-3, 4.0]);
+        assert_eq!(tr.column("t").unwrap()[1], 0.0002);
+        assert!(tr.column("phase").is_none());
+        assert_eq!(tr.phase().unwrap().get(0), Some("approach"));
+        assert_eq!(tr.truth().unwrap().distinct(), ["", "contact"]);
+        assert_eq!(tr.truth_onset(), Some((2, "contact")));
+        assert_eq!(tr.meta("scenario"), Some("contact_hard_8"));
+        assert_eq!(tr.metadata().len(), 1, "plain comments are not metadata");
+    }
+
+    #[test]
+    fn accepts_any_channel_names_and_order() {
+        let tr = parse("pressure_kpa,t,Temp\n1,10,2\n2,10.5,3\n3,11,4\n").unwrap();
+        assert_eq!(tr.channel_names(), ["pressure_kpa", "Temp"]);
+        assert!((tr.rate_hz() - 2.0).abs() < 1e-12);
+        assert!(tr.phase().is_none() && tr.truth().is_none() && tr.truth_onset().is_none());
+    }
+
+    #[test]
+    fn tolerates_crlf_and_bom() {
+        let tr = parse("\u{feff}t,a\r\n0,1\r\n1,2\r\n").unwrap();
+        assert_eq!(tr.column("a").unwrap(), [1.0, 2.0]);
+    }
+
+    #[test]
+    fn error_empty_file() {
+        let m = message("");
+        assert!(m.contains("no header"), "{m}");
+        let m = message("# only: comments\n\n# here\n");
+        assert!(m.contains("no header"), "{m}");
+    }
+
+    #[test]
+    fn error_no_rows() {
+        let m = message("# x: y\nt,force_x\n# nothing\n");
+        assert!(m.contains("line 2") && m.contains("no data rows"), "{m}");
+    }
+
+    #[test]
+    fn error_single_row() {
+        let m = message("t,a\n0,1\n");
+        assert!(m.contains("line 2") && m.contains("only one data row"), "{m}");
+    }
+
+    #[test]
+    fn error_missing_time() {
+        let m = message("# c\ntime,force_x\n0,1\n1,2\n");
+        assert!(m.contains("line 2") && m.contains("no column `t`"), "{m}");
+    }
+
+    #[test]
+    fn error_duplicate_column() {
+        let m = message("t,force_x,force_x\n0,1,2\n1,2,3\n");
+        assert!(
+            m.contains("line 1, column 3") && m.contains("duplicate column name `force_x`"),
+            "{m}"
+        );
+    }
+
+    #[test]
+    fn error_empty_column_name() {
+        let m = message("t,force_x,\n0,1,\n1,2,\n");
+        assert!(m.contains("line 1, column 3") && m.contains("empty column name"), "{m}");
+    }
+
+    #[test]
+    fn error_non_numeric_cell() {
+        let m = message("t,force_x,skin_accel\n0,1,2\n# c\n0.1,abc,3\n");
+        assert!(
+            m.contains("line 4, column 2 `force_x`") && m.contains("`abc` is not a number"),
+            "{m}"
+        );
+        let m = message("t,force_x\n0,1\n0.1,\n");
+        assert!(m.contains("line 3, column 2") && m.contains("``"), "{m}");
+    }
+
+    #[test]
+    fn error_non_finite_cell() {
+        for bad in ["NaN", "inf", "-inf", "1e400"] {
+            let m = message(&format!("t,force_x\n0,1\n0.1,{bad}\n"));
+            assert!(
+                m.contains("line 3, column 2 `force_x`") && m.contains("not finite"),
+                "{m}"
+            );
+        }
+        let m = message("force_x,t\n0,NaN\n0.1,1\n");
+        assert!(m.contains("line 2, column 2 `t`") && m.contains("not finite"), "{m}");
+    }
+
+    #[test]
+    fn error_wrong_cell_count() {
+        let m = message("t,force_x\n0,1\n0.1,2,3\n");
+        assert!(m.contains("line 3") && m.contains("3 cells") && m.contains("2 columns"), "{m}");
+        let m = message("t,force_x\n0\n0.1,2\n");
+        assert!(m.contains("line 2") && m.contains("1 cells"), "{m}");
+    }
+
+    #[test]
+    fn error_decreasing_time() {
+        let m = message("t,a\n0,1\n0.2,1\n0.1,1\n0.3,1\n");
+        assert!(
+            m.contains("line 4, column 1 `t`") && m.contains("does not increase"),
+            "{m}"
+        );
+        let m = message("a,t\n1,0\n1,0\n");
+        assert!(m.contains("line 3, column 2 `t`"), "{m}");
+    }
+
+    #[test]
+    fn error_non_uniform_time() {
+        let mut text = String::from("t,a\n");
+        for k in 0..100 {
+            let t = if k < 50 { k as f64 } else { k as f64 + 0.5 };
+            text.push_str(&format!("{t},0\n"));
+        }
+        let m = message(&text);
+        assert!(m.contains("line 52, column 1 `t`") && m.contains("uniform"), "{m}");
+    }
+
+    #[test]
+    fn small_time_jitter_is_accepted() {
+        let mut text = String::from("t,a\n");
+        for k in 0..100 {
+            let jitter = if k % 2 == 0 { 0.002 } else { -0.002 };
+            text.push_str(&format!("{},0\n", k as f64 + jitter));
+        }
+        assert!(parse(&text).is_ok());
+    }
+
+    #[test]
+    fn read_names_the_file_when_missing() {
+        let e = Trace::read("/nonexistent/dir/x.csv").unwrap_err();
+        assert!(e.to_string().starts_with("/nonexistent/dir/x.csv: cannot read"));
+    }
+
+    fn sample() -> Trace {
+        let n = 50;
+        let t: Vec<f64> = (0..n).map(|k| k as f64 / 5000.0).collect();
+        let a: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() * 1e-3).collect();
+        let b: Vec<f64> = (0..n).map(|k| -(k as f64) * 1.0e7 + 1.0 / 3.0).collect();
+        let mut tr = Trace::from_columns("mem", t, vec![("force_x".into(), a), ("x y".into(), b)])
+            .unwrap()
+            .with_phase(Labels::uniform("approach", n))
+            .unwrap()
+            .with_truth(Labels::switch_at("", "contact", 7, n))
+            .unwrap();
+        tr.push_metadata("scenario", "contact_hard_8").unwrap();
+        tr.push_metadata("note", "value: with colon").unwrap();
+        tr
+    }
+
+    #[test]
+    fn round_trip_through_text() {
+        let tr = sample();
+        let mut back = Trace::parse(&tr.to_csv(), "mem").unwrap();
+        assert_eq!(back, tr);
+        back.set_name("other");
+        assert_ne!(back, tr);
+        assert_eq!(back.truth_onset(), Some((7, "contact")));
+    }
+
+    #[test]
+    fn round_trip_through_file_and_no_temp_left() {
+        let dir = std::env::temp_dir().join(format!("trace-rt-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("run.csv");
+        let tr = sample();
+        tr.write(&path).unwrap();
+        let mut back = Trace::read(&path).unwrap();
+        back.set_name("mem");
+        assert_eq!(back, tr);
+        let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names.len(), 1, "only the trace, no temporary file: {names:?}");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn failed_write_leaves_nothing() {
+        let dir = std::env::temp_dir().join(format!("trace-fail-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        // The destination is a directory: the rename fails after the temp file was written.
+        let dest = dir.join("occupied");
+        fs::create_dir_all(dest.join("inner")).unwrap();
+        let e = sample().write(&dest).unwrap_err();
+        assert!(e.to_string().contains("cannot write"), "{e}");
+        let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert_eq!(names, ["occupied"], "temporary file removed");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn constructors_reject_bad_input() {
+        let t = vec![0.0, 1.0, 2.0];
+        let e = Trace::from_columns("m", t.clone(), vec![("a".into(), vec![1.0])]).unwrap_err();
+        assert!(matches!(e, TraceError::LengthMismatch { .. }), "{e}");
+        let e = Trace::from_columns("m", t.clone(), vec![("a,b".into(), vec![1.0; 3])]).unwrap_err();
+        assert!(matches!(e, TraceError::InvalidText { .. }), "{e}");
+        let e = Trace::from_columns("m", t.clone(), vec![("truth".into(), vec![1.0; 3])]).unwrap_err();
+        assert!(matches!(e, TraceError::DuplicateColumn { .. }), "{e}");
+        let e = Trace::from_columns("m", t.clone(), vec![("a".into(), vec![1.0, f64::NAN, 0.0])])
+            .unwrap_err();
+        assert!(matches!(e, TraceError::NotFinite { line: 3, .. }), "{e}");
+        let e = Trace::from_columns("m", vec![0.0, 2.0, 1.0], vec![]).unwrap_err();
+        assert!(matches!(e, TraceError::TimeNotIncreasing { .. }), "{e}");
+        let tr = Trace::from_columns("m", t, vec![]).unwrap();
+        let e = tr.clone().with_phase(Labels::uniform("a", 2)).unwrap_err();
+        assert!(matches!(e, TraceError::LengthMismatch { .. }), "{e}");
+        let e = tr.clone().with_truth(Labels::uniform("a,b", 3)).unwrap_err();
+        let e2 = tr.clone().with_truth(["x", " y", "z"].into_iter().collect()).unwrap_err();
+        assert!(matches!(e2, TraceError::InvalidText { .. }), "{e2}");
+        assert!(matches!(e, TraceError::InvalidText { .. }), "{e}");
+        let mut tr = tr;
+        assert!(tr.push_metadata("bad key", "v").is_err());
+        assert!(tr.push_metadata("k", "two\nlines").is_err());
+    }
+}

@@ -1,0 +1,305 @@
+//! Each feature stage of the fixed-point engine against its `f64` definition (the
+//! `StageSpec` documentation, eq. 17 for the STE), over random inputs given as raw 16.16 bits
+//! (so input quantization is not counted). The bounds, with `LSB = 2⁻¹⁶`:
+//!
+//! | stage | inputs | bound |
+//! |---|---|---|
+//! | raw, abs, difference | any | exact (saturating at the `Signal` range) |
+//! | rate | any, integer rate | exact (saturating) |
+//! | rate | any, any rate | `2⁻⁸ |Δx| + 1 LSB` (the rate is held to 1/256 Hz) |
+//! | dot | any | 1 LSB (saturating) |
+//! | magnitude | any | `1 LSB + 2⁻¹⁵ |m|` (16 significant bits above 1 unit) |
+//! | low-pass | `|x| < 16384`, `f_s/1000 ≤ f_c ≤ 0.45 f_s` | `1 LSB + 2⁻²⁰ max|x|` |
+//! | STE, eq. 17 | `|x| < 256`, N in 1..=128 | `2 LSB + N 2⁻²³ max x² + N 2⁻²⁵ ζ` |
+//!
+//! The STE bound's middle term is the Q24 rounding of the window taps (a triangular window's
+//! end taps are only about 2⁻¹² of the window, so their relative rounding is 2⁻¹²), the last
+//! the rounding of 1/N.
+//!
+//! Two documented behaviours the engine does not have are pinned by `#[ignore]`d tests
+//! (run them with `cargo test -- --ignored`): the STE saturates each square at 65 536 instead
+//! of saturating the result at the `Signal` range, and the low-pass goes wrong when its
+//! input is more than 32768 away from its state.
+//!
+//! Case counts: [`CASES`] per property (override with `PROPTEST_CASES`).
+
+#[path = "reference_support.rs"]
+mod support;
+
+use detector_core::{Config, Name, Signal, StageSpec, Window};
+use proptest::prelude::*;
+use support::*;
+
+/// Cases per property.
+const CASES: u32 = 128;
+/// One 16.16 step.
+const LSB: f64 = 1.0 / 65536.0;
+
+/// A configuration with channels `x y z w` and the given features (one event on the first).
+fn features_config(rate_hz: f32, features: Vec<(&str, StageSpec<Name>)>) -> Config {
+    let first = features[0].0.to_string();
+    config(
+        rate_hz,
+        &["x", "y", "z", "w"],
+        features,
+        vec![event(
+            "e",
+            vec![],
+            vec![sensor(&first, 1.0, sigmoid(0.0, 1.0))],
+        )],
+        vec![phase("p", &["e"])],
+    )
+}
+
+/// Runs the engine and the model; per tick, the (engine, model) feature values.
+fn run(config: &Config, samples: &[[i32; 4]]) -> Vec<(Vec<f64>, Vec<f64>)> {
+    let steps: Vec<Step> = samples
+        .iter()
+        .map(|s| Step {
+            samples: s.to_vec(),
+            ..Step::default()
+        })
+        .collect();
+    run_both(config, &steps)
+        .into_iter()
+        .map(|b| (b.features, b.model.features))
+        .collect()
+}
+
+/// Raw samples within ±2^k for a random k in `kmin..=kmax` (k = 31: any bits).
+fn samples(kmin: u32, kmax: u32, len: usize) -> impl Strategy<Value = Vec<[i32; 4]>> {
+    (kmin..=kmax).prop_flat_map(move |k| {
+        prop::collection::vec(any::<[i32; 4]>(), 1..=len).prop_map(move |v| {
+            v.into_iter()
+                .map(|s| s.map(|w| if k >= 31 { w } else { w >> (31 - k) }))
+                .collect()
+        })
+    })
+}
+
+fn stage(kind: &str) -> StageSpec<Name> {
+    match kind {
+        "abs" => StageSpec::Abs { input: name("x") },
+        "difference" => StageSpec::Difference {
+            a: name("x"),
+            b: name("y"),
+        },
+        "rate" => StageSpec::Rate { input: name("x") },
+        "dot" => StageSpec::Dot {
+            a: [name("x"), name("y")],
+            b: [name("z"), name("w")],
+        },
+        "magnitude" => StageSpec::Magnitude {
+            of: [name("x"), name("y")],
+        },
+        _ => raw("x"),
+    }
+}
+
+proptest! {
+    #![proptest_config(proptest_config(CASES, "proptest-regressions/reference_features.txt"))]
+
+    /// Raw, abs, difference, and rate at an integer detector rate are exact, saturating
+    /// at the `Signal` range, including the extremes of the input range.
+    #[test]
+    fn exact_stages_are_exact(
+        rate in 10u32..=50_000,
+        s in prop_oneof![samples(4, 31, 80), Just(vec![[i32::MIN, i32::MAX, 0, -1], [i32::MAX, i32::MIN, 1, 0], [i32::MIN; 4]])],
+    ) {
+        let kinds = ["raw", "abs", "difference", "rate"];
+        let c = features_config(rate as f32, kinds.iter().map(|k| (*k, stage(k))).collect());
+        for (t, (got, want)) in run(&c, &s).iter().enumerate() {
+            for (i, kind) in kinds.iter().enumerate() {
+                prop_assert_eq!(got[i], want[i], "{} at tick {}", kind, t);
+            }
+        }
+    }
+
+    /// The rate at any detector rate: within 2⁻⁸ |Δx| + 1 LSB; zero on the first tick.
+    #[test]
+    fn rate_within_bound(rate in 10.0f32..=50_000.0, s in samples(4, 31, 60)) {
+        let c = features_config(rate, vec![("rate", stage("rate"))]);
+        let mut prev: Option<f64> = None;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            let x = Signal::from_bits(row[0]).to_f64();
+            let dx = prev.map_or(0.0, |p| (x - p).abs());
+            prev = Some(x);
+            if t == 0 {
+                prop_assert_eq!(got[0], 0.0);
+            }
+            prop_assert!((got[0] - want[0]).abs() <= dx / 256.0 + LSB,
+                "tick {}: engine {} model {} (rate {})", t, got[0], want[0], rate);
+        }
+    }
+
+    /// The dot product: within 1 LSB, saturating.
+    #[test]
+    fn dot_within_one_lsb(s in samples(4, 31, 60)) {
+        let c = features_config(5000.0, vec![("dot", stage("dot"))]);
+        for (t, (got, want)) in run(&c, &s).iter().enumerate() {
+            prop_assert!((got[0] - want[0]).abs() <= LSB, "tick {}: engine {} model {}", t, got[0], want[0]);
+        }
+    }
+
+    /// The magnitude: within 1 LSB + 2⁻¹⁵ of its value, saturating.
+    #[test]
+    fn magnitude_within_relative_bound(s in samples(4, 31, 60)) {
+        let c = features_config(5000.0, vec![("magnitude", stage("magnitude"))]);
+        for (t, (got, want)) in run(&c, &s).iter().enumerate() {
+            prop_assert!((got[0] - want[0]).abs() <= LSB + want[0] / 32768.0,
+                "tick {}: engine {} model {}", t, got[0], want[0]);
+        }
+    }
+
+    /// The low-pass (backward Euler, α = Δt/(τ + Δt), seeded with the first sample): within
+    /// 1 LSB + 2⁻²⁰ max|x| for inputs below 16384 and cut-offs from f_s/1000 to 0.45 f_s.
+    #[test]
+    fn low_pass_within_bound(
+        rate in 10.0f32..=50_000.0,
+        fraction in 0.001f32..=0.45,
+        s in samples(4, 29, 300),
+    ) {
+        let lp = |cutoff_hz| StageSpec::LowPass { input: name("x"), cutoff_hz };
+        let c = features_config(rate, vec![("lp", lp(rate * fraction)), ("lp2", lp(rate * 0.45))]);
+        let mut max_x: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
+            for i in 0..2 {
+                prop_assert!((got[i] - want[i]).abs() <= LSB + max_x / 1_048_576.0,
+                    "feature {} tick {}: engine {} model {}", i, t, got[i], want[i]);
+            }
+        }
+    }
+
+    /// The short-time energy against eq. 17 with the normalized window, both shapes, windows
+    /// 1..=128, inputs below 256 in magnitude, from the first tick (missing samples zero).
+    #[test]
+    fn ste_matches_eq_17(
+        n1 in 1u16..=128,
+        n2 in 1u16..=128,
+        s in samples(4, 23, 300),
+    ) {
+        let ste = |input: &str, window, shape| StageSpec::Ste { input: name(input), window, shape };
+        let c = features_config(5000.0, vec![
+            ("rect", ste("x", n1, Window::Rectangular)),
+            ("tri", ste("y", n2, Window::Triangular)),
+        ]);
+        let mut max_sq = [0.0f64; 2];
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            for (i, n) in [n1, n2].into_iter().enumerate() {
+                let x = Signal::from_bits(row[i]).to_f64();
+                max_sq[i] = max_sq[i].max(x * x);
+                let n = f64::from(n);
+                let bound = 2.0 * LSB + n * max_sq[i] / 8_388_608.0 + n * want[i] / 33_554_432.0;
+                prop_assert!((got[i] - want[i]).abs() <= bound,
+                    "window {} tick {}: engine {} model {} bound {:e}", i, t, got[i], want[i], bound);
+            }
+        }
+    }
+}
+
+/// Eq. 17 by hand for a constant input: after N samples ζ = x² whatever the window; before,
+/// the rectangular window gives (k + 1) x² / N after k + 1 samples.
+#[test]
+fn ste_of_a_constant_by_hand() {
+    let ste = |window, shape| StageSpec::Ste {
+        input: name("x"),
+        window,
+        shape,
+    };
+    let c = features_config(
+        5000.0,
+        vec![
+            ("rect", ste(4, Window::Rectangular)),
+            ("tri", ste(5, Window::Triangular)),
+        ],
+    );
+    // x = 3: x² = 9. Rectangular N = 4: 9/4, 18/4, 27/4, 9, 9.
+    // Triangular N = 5: taps ∝ 1 − |2m − 4|/6 = 1/3, 2/3, 1, 2/3, 1/3 (sum 3), so
+    // h = 1/9, 2/9, 3/9, 2/9, 1/9 and the partial sums of 9 h are 1, 3, 6, 8, 9.
+    let x = 3 << 16;
+    let got: Vec<(f64, f64)> = run(&c, &[[x, 0, 0, 0]; 6])
+        .into_iter()
+        .map(|(g, _)| (g[0], g[1]))
+        .collect();
+    let rect = [2.25, 4.5, 6.75, 9.0, 9.0, 9.0];
+    let tri = [1.0, 3.0, 6.0, 8.0, 9.0, 9.0];
+    for (t, (r, tr)) in got.into_iter().enumerate() {
+        assert!((r - rect[t]).abs() <= 2.0 * LSB, "rect tick {t}: {r}");
+        assert!((tr - tri[t]).abs() <= 4.0 * LSB, "tri tick {t}: {tr}");
+    }
+}
+
+/// The low-pass by hand: at f_c = f_s / (2π), τ = Δt so α = ½; seeded with the first sample.
+#[test]
+fn low_pass_by_hand() {
+    let rate = 1000.0f32;
+    let c = features_config(
+        rate,
+        vec![(
+            "lp",
+            StageSpec::LowPass {
+                input: name("x"),
+                cutoff_hz: rate / (2.0 * std::f32::consts::PI),
+            },
+        )],
+    );
+    // x: 2, 4, 4, 0 → y: 2 (seed), 3, 3.5, 1.75.
+    let s = [2, 4, 4, 0].map(|v| [v << 16, 0, 0, 0]);
+    let want = [2.0, 3.0, 3.5, 1.75];
+    for (t, (got, _)) in run(&c, &s).into_iter().enumerate() {
+        assert!(
+            (got[0] - want[t]).abs() <= 2.0 * LSB,
+            "tick {t}: {}",
+            got[0]
+        );
+    }
+}
+
+/// Documented: the STE is a mean square saturating at the `Signal` range. One sample of 300
+/// in a rectangular window of 4 is 300²/4 = 22500, well inside the range.
+#[test]
+#[ignore = "engine bug: each square saturates at 65536, so this gives 16384 (see the report)"]
+fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
+    let c = features_config(
+        5000.0,
+        vec![(
+            "ste",
+            StageSpec::Ste {
+                input: name("x"),
+                window: 4,
+                shape: Window::Rectangular,
+            },
+        )],
+    );
+    let got = run(&c, &[[300 << 16, 0, 0, 0]]);
+    assert!((got[0].0[0] - 22500.0).abs() <= 2.0 * LSB, "{:?}", got[0]);
+}
+
+/// Documented: y += α (x − y). From y = 30000, x = −30000 at α = ½ gives 0, then −15000.
+#[test]
+#[ignore = "engine bug: the low-pass goes wrong when x − y leaves the 16.16 range (see the report)"]
+fn low_pass_follows_a_step_across_the_range() {
+    let rate = 1000.0f32;
+    let c = features_config(
+        rate,
+        vec![(
+            "lp",
+            StageSpec::LowPass {
+                input: name("x"),
+                cutoff_hz: rate / (2.0 * std::f32::consts::PI),
+            },
+        )],
+    );
+    let s = [30000, -30000, -30000].map(|v| [v << 16, 0, 0, 0]);
+    let want = [30000.0, 0.0, -15000.0];
+    for (t, (got, model)) in run(&c, &s).into_iter().enumerate() {
+        // α is ½ to within f32 rounding of the cut-off: a few 10⁻³ at this scale.
+        assert!(
+            (model[0] - want[t]).abs() <= 0.01,
+            "model tick {t}: {}",
+            model[0]
+        );
+        assert!((got[0] - want[t]).abs() <= 0.01, "tick {t}: {}", got[0]);
+    }
+}

@@ -1,0 +1,36 @@
+#!/usr/bin/env bash
+# The whole test suite, runnable on a fresh Debian machine with only rustup/cargo and
+# Python 3: installs what it needs (idempotently), then checks formatting, lints, host
+# tests, the emulated Cortex-M4 run and the firmware's size budget.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n=== %s\n' "$*"; }
+as_root() { if [ "$(id -u)" -eq 0 ]; then "$@"; else sudo "$@"; fi; }
+
+step "toolchain: thumbv7em-none-eabihf, clippy, rustfmt, llvm-tools"
+rustup target add thumbv7em-none-eabihf >/dev/null
+rustup component add clippy rustfmt llvm-tools >/dev/null
+
+step "system packages: qemu-system-arm, binutils-arm-none-eabi"
+if ! command -v qemu-system-arm >/dev/null || ! command -v arm-none-eabi-objdump >/dev/null; then
+    as_root apt-get update -q
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends \
+        qemu-system-arm binutils-arm-none-eabi
+fi
+
+step "python venv with cantools (.venv)"
+if ! .venv/bin/python -c 'import cantools' 2>/dev/null; then
+    python3 -m venv .venv
+    .venv/bin/pip install -q cantools
+fi
+
+step "formatting"
+cargo fmt --all --check
+
+step "lints (host crates)"
+cargo clippy --all-targets -- -D warnings
+
+step "tests (host)"
+export FINGERTIP_REQUIRE_PYTHON=1 FINGERTIP_REQUIRE_QEMU=1
+cargo test
