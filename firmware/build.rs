@@ -67,11 +67,24 @@ fn main() -> Result<()> {
     };
 
     let mut consts = String::new();
-    writeln!(consts, "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded configuration's postcard bytes.")?;
-    writeln!(consts, "pub const CONFIG_CHECKSUM: u32 = {:#010x};", checksum::crc32(&bytes))?;
-    writeln!(consts, "/// The configuration file the firmware was built with, from the workspace root.")?;
+    writeln!(
+        consts,
+        "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded configuration's postcard bytes."
+    )?;
+    writeln!(
+        consts,
+        "pub const CONFIG_CHECKSUM: u32 = {:#010x};",
+        checksum::crc32(&bytes)
+    )?;
+    writeln!(
+        consts,
+        "/// The configuration file the firmware was built with, from the workspace root."
+    )?;
     writeln!(consts, "pub const CONFIG_SOURCE: &str = {config_rel:?};")?;
-    writeln!(consts, "/// The CAN node id the firmware was built for (`FINGERTIP_NODE_ID`, 0..=15).")?;
+    writeln!(
+        consts,
+        "/// The CAN node id the firmware was built for (`FINGERTIP_NODE_ID`, 0..=15)."
+    )?;
     writeln!(consts, "pub const NODE_ID: u8 = {node};")?;
     fs::write(out.join("build_consts.rs"), consts)?;
 

@@ -109,7 +109,9 @@ pub struct LevelSpec {
     pub on: f32,
     /// ... and cleared when the confidence falls below `off` (≤ `on`).
     pub off: f32,
-    /// Minimum time at or above `on` before the level is raised, in ms (0: the first tick).
+    /// Minimum time at or above `on` before the level is raised, in ms: the level is
+    /// raised on the n-th consecutive tick at or above `on`, n = max(1, round(dwell_ms ·
+    /// rate / 1000)); 0 (the default) raises it on the first such tick.
     #[cfg_attr(feature = "serde", serde(default))]
     pub dwell_ms: f32,
 }
@@ -245,7 +247,7 @@ impl core::fmt::Display for Problem {
             Problem::Stage(e) => write!(f, "{e}"),
             Problem::Cdf(e) => write!(f, "cdf: {e}"),
             Problem::Weight(w) => write!(f, "weight = {w} must be within [0, 1]"),
-            Problem::WeightSum(s) => write!(f, "sensor weights sum to {s}, above 1"),
+            Problem::WeightSum(s) => write!(f, "sensor weights sum to {s:.3}, above 1"),
             Problem::Level { param, value, rule } => write!(f, "{param} = {value} {rule}"),
             Problem::Scale(k) => write!(f, "scale = {k} must be a positive, finite number"),
             Problem::Dwell(d) => write!(
@@ -288,7 +290,13 @@ pub enum LoadError {
 impl core::fmt::Display for LoadError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            LoadError::Syntax(e) => write!(f, "{}", e.to_string().trim_end()),
+            // The toml crate's own text spans several lines (a source excerpt); keep its
+            // position line and its message, on one line.
+            LoadError::Syntax(e) => {
+                let text = e.to_string();
+                let position = text.lines().next().unwrap_or("TOML parse error");
+                write!(f, "{position}: {}", e.message().trim_end())
+            }
             LoadError::Invalid(e) => write!(f, "{e}"),
         }
     }

@@ -154,7 +154,7 @@ pub struct State {
     /// Channel samples then feature values, raw 16.16.
     values: [i32; MAX_SLOTS],
     stages: [StageState; MAX_FEATURES],
-    ring: [u32; STE_POOL],
+    ring: [u64; STE_POOL],
     /// Per event, context term confidences then sensor term confidences (Q15).
     psi: [[u16; 2 * MAX_TERMS]; MAX_EVENTS],
     events: [EventState; MAX_EVENTS],
@@ -287,7 +287,7 @@ fn level(
         );
     }
     let ticks = spec.dwell_ms * rate_hz / 1000.0;
-    if !(ticks.is_finite() && ticks >= 0.0 && ticks <= 65535.0) {
+    if !(ticks.is_finite() && (0.0..=65535.0).contains(&ticks)) {
         return err(item, Problem::Dwell(spec.dwell_ms));
     }
     Ok(LevelParams {
@@ -592,7 +592,8 @@ impl Detector {
     }
 
     /// Switches phase. Switching to another phase lowers every level and forgets onsets;
-    /// features keep running, so they are warm in the new phase.
+    /// "switching" to the active phase changes nothing. Features keep running in every
+    /// phase, so they are warm in the new one.
     pub fn set_phase(&self, state: &mut State, phase: PhaseId) {
         if state.phase != phase.0 {
             state.phase = phase.0;

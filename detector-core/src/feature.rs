@@ -41,7 +41,9 @@ pub enum StageSpec<N> {
         input: N,
     },
     /// First-order low-pass, backward-Euler discretization:
-    /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c).
+    /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c). The output starts at the
+    /// first sample, so a channel's offset does not look like a step. The state keeps 32
+    /// fraction bits.
     LowPass {
         /// Source channel or feature.
         input: N,
@@ -75,7 +77,9 @@ pub enum StageSpec<N> {
     },
     /// Short-time energy (the paper's eq. 17): ζ_n = Σ_{m=0}^{N−1} x²(n−m) h(m), with the
     /// window h normalized to sum 1, so ζ is a mean square in the input's unit squared
-    /// whatever N. Until N samples have arrived the missing ones count as zero.
+    /// whatever N. Until N samples have arrived the missing ones count as zero. Inputs
+    /// saturate at ±2048 before squaring (so a window's sums fit 64 bits); the result
+    /// saturates at the [`Signal`] range.
     Ste {
         /// Source channel or feature.
         input: N,
@@ -209,7 +213,7 @@ pub(crate) enum Stage {
     Difference(u8, u8),
     Dot([u8; 4]),
     Magnitude(u8, u8),
-    /// History `ring[offset..offset + len]`; rectangular windows keep a running sum and
+    /// History of squares `ring[offset..offset + len]` (Q16, at most 2³⁸); rectangular windows keep a running sum and
     /// scale by `recip` = 2²⁴/N, tapered ones use `weights[offset..offset + len]` (Q24).
     Ste {
         input: u8,
@@ -223,7 +227,7 @@ pub(crate) enum Stage {
 /// Per-feature running state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct StageState {
-    /// Low-pass output in Q32, or the STE running sum of squares (Q16).
+    /// Low-pass output in Q32, or the STE running sum of squares (Q16, below 2⁴⁶).
     acc: i64,
     /// The previous input (rate).
     prev: i32,
@@ -309,7 +313,7 @@ impl Stage {
         &self,
         st: &mut StageState,
         values: &[i32],
-        ring: &mut [u32; STE_POOL],
+        ring: &mut [u64; STE_POOL],
         weights: &[u32; STE_POOL],
     ) -> i32 {
         let get = |slot: u8| values.get(usize::from(slot)).copied().unwrap_or(0);
@@ -322,8 +326,8 @@ impl Stage {
                     st.primed = true;
                     st.acc = i64::from(x) << 16;
                 } else {
-                    let diff =
-                        (i64::from(x) - (st.acc >> 16)).clamp(i32::MIN.into(), i32::MAX.into());
+                    // |diff| < 2^32 and alpha < 2^31, so the product fits in 63 bits.
+                    let diff = i64::from(x) - (st.acc >> 16);
                     st.acc += (diff * i64::from(alpha)) >> 15;
                 }
                 sat32(st.acc >> 16)
@@ -331,8 +335,8 @@ impl Stage {
             Stage::Rate { input, rate } => {
                 let x = get(input);
                 let out = if st.primed {
-                    let d =
-                        (i64::from(x) - i64::from(st.prev)).clamp(i32::MIN.into(), i32::MAX.into());
+                    // |d| < 2^32 and rate < 2^24, so the product fits.
+                    let d = i64::from(x) - i64::from(st.prev);
                     sat32((d * i64::from(rate)) >> 8)
                 } else {
                     0
@@ -359,8 +363,8 @@ impl Stage {
                 recip,
                 tapered,
             } => {
-                let x = i64::from(get(input));
-                let sq = ((x * x) >> 16).min(u32::MAX.into()) as u32;
+                let x = i64::from(get(input)).clamp(-STE_INPUT_LIMIT, STE_INPUT_LIMIT);
+                let sq = ((x * x) >> 16) as u64;
                 let start = usize::from(offset);
                 let n = usize::from(len);
                 let (Some(hist), Some(taps)) = (
@@ -382,6 +386,7 @@ impl Stage {
                 if tapered {
                     // Lag m pairs with taps[m]: lags 0..=newest run back from `newest`, the
                     // remaining lags run back from the end of the ring.
+                    // Squares ≤ 2^38 and taps summing to 2^24 keep the sum below 2^62.
                     let (recent, older) = hist.split_at(newest + 1);
                     let (near, far) = taps.split_at(newest + 1);
                     let acc: u64 = recent
@@ -389,11 +394,13 @@ impl Stage {
                         .rev()
                         .zip(near)
                         .chain(older.iter().rev().zip(far))
-                        .map(|(&s, &w)| u64::from(s) * u64::from(w))
+                        .map(|(&s, &w)| s * u64::from(w))
                         .sum();
                     (acc >> 24).min(i32::MAX as u64) as i32
                 } else {
-                    st.acc += i64::from(sq) - i64::from(oldest);
+                    // Exact: what enters now leaves N ticks later. sum ≤ N · 2^38 and
+                    // recip ≤ 2^24 / N keep the product below 2^63.
+                    st.acc += sq as i64 - oldest as i64;
                     let sum = st.acc.max(0) as u64;
                     ((sum * u64::from(recip)) >> 24).min(i32::MAX as u64) as i32
                 }
@@ -401,6 +408,9 @@ impl Stage {
         }
     }
 }
+
+/// STE inputs saturate here before squaring: 2048 in raw 16.16 bits.
+const STE_INPUT_LIMIT: i64 = 2048 << 16;
 
 /// Saturates to the `i32` range.
 #[inline]
@@ -468,7 +478,7 @@ mod tests {
         let mut used = 0;
         let stage = Stage::compile(&spec, 1000.0, &mut used, &mut weights).expect("valid stage");
         let mut st = StageState::default();
-        let mut ring = [0u32; STE_POOL];
+        let mut ring = [0u64; STE_POOL];
         (0..inputs[0].len())
             .map(|k| {
                 let values: Vec<i32> = inputs

@@ -174,10 +174,10 @@ impl core::fmt::Display for Confidence {
 /// subtraction. The caller supplies it; the core keeps no clock.
 pub type Tick = u32;
 
-/// A set of input channels, bit `i` for channel `i` (at most [`crate::MAX_CHANNELS`] = 32).
+/// A set of input channels, bit `i` for channel `i` (`i` < [`crate::MAX_CHANNELS`]).
 pub type ChannelMask = u32;
 
-/// A set of events, bit `i` for event `i` (at most [`crate::MAX_EVENTS`] = 8).
+/// A set of events, bit `i` for event `i` (`i` < [`crate::MAX_EVENTS`]).
 pub type EventMask = u8;
 
 #[cfg(test)]

@@ -86,7 +86,10 @@ mod tests {
     fn corrupt_bytes_are_reported() {
         let r: Result<Config, _> = postcard::from_bytes(&CONFIG_POSTCARD[..10]);
         assert!(r.is_err());
-        assert_eq!(format!("{}", BootError::Decode), "the embedded configuration does not decode");
+        assert_eq!(
+            format!("{}", BootError::Decode),
+            "the embedded configuration does not decode"
+        );
     }
 
     #[test]

@@ -37,7 +37,10 @@ impl core::fmt::Display for CalibrationError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             CalibrationError::Gain(g) => {
-                write!(f, "gain {g} per count is not finite, non-zero and below 128")
+                write!(
+                    f,
+                    "gain {g} per count is not finite, non-zero and below 128"
+                )
             }
             CalibrationError::Zero(z) => write!(f, "zero {z} counts is not within 0..=65535"),
             CalibrationError::Drift(d) => {
@@ -73,7 +76,12 @@ impl Calibration {
     /// A calibration: `gain` units per count (e.g. N/count), `zero` the counts read at a
     /// zero of the quantity at `t_ref` °C, `drift` the change of that zero in counts per
     /// °C. Usable in `const` context, so a bad table entry fails the build.
-    pub const fn new(gain: f32, zero: f32, drift: f32, t_ref: f32) -> Result<Self, CalibrationError> {
+    pub const fn new(
+        gain: f32,
+        zero: f32,
+        drift: f32,
+        t_ref: f32,
+    ) -> Result<Self, CalibrationError> {
         let g = gain * 16_777_216.0;
         if !gain.is_finite() || gain == 0.0 || g >= 2_147_483_520.0 || g <= -2_147_483_520.0 {
             return Err(CalibrationError::Gain(gain));
@@ -107,7 +115,8 @@ impl Calibration {
             }
             None => 0,
         };
-        let zero = (i64::from(self.zero_q8) + shift).clamp(i64::from(i32::MIN), i64::from(i32::MAX));
+        let zero =
+            (i64::from(self.zero_q8) + shift).clamp(i64::from(i32::MIN), i64::from(i32::MAX));
         ActiveCalibration {
             gain_q24: self.gain_q24,
             zero_q8: zero as i32,
@@ -210,11 +219,23 @@ mod tests {
 
     #[test]
     fn bad_parameters_are_rejected_with_their_value() {
-        assert_eq!(Calibration::new(0.0, 1.0, 0.0, 25.0), Err(CalibrationError::Gain(0.0)));
-        assert_eq!(Calibration::new(200.0, 1.0, 0.0, 25.0), Err(CalibrationError::Gain(200.0)));
+        assert_eq!(
+            Calibration::new(0.0, 1.0, 0.0, 25.0),
+            Err(CalibrationError::Gain(0.0))
+        );
+        assert_eq!(
+            Calibration::new(200.0, 1.0, 0.0, 25.0),
+            Err(CalibrationError::Gain(200.0))
+        );
         assert!(Calibration::new(f32::NAN, 1.0, 0.0, 25.0).is_err());
-        assert_eq!(Calibration::new(1.0, -1.0, 0.0, 25.0), Err(CalibrationError::Zero(-1.0)));
-        assert_eq!(Calibration::new(1.0, 1.0, 2000.0, 25.0), Err(CalibrationError::Drift(2000.0)));
+        assert_eq!(
+            Calibration::new(1.0, -1.0, 0.0, 25.0),
+            Err(CalibrationError::Zero(-1.0))
+        );
+        assert_eq!(
+            Calibration::new(1.0, 1.0, 2000.0, 25.0),
+            Err(CalibrationError::Drift(2000.0))
+        );
         assert_eq!(
             Calibration::new(1.0, 1.0, 0.0, f32::INFINITY),
             Err(CalibrationError::Reference(f32::INFINITY))

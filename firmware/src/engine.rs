@@ -285,7 +285,11 @@ impl<'d> Engine<'d> {
         s.worst_tick = health.worst_tick;
         s.bus_errors = health.bus_errors;
         s.tx_dropped = health.tx_dropped.saturating_add(self.tx.dropped());
-        for flag in [FaultFlags::OVERRUN, FaultFlags::BUS_ERROR, FaultFlags::TX_DROPPED] {
+        for flag in [
+            FaultFlags::OVERRUN,
+            FaultFlags::BUS_ERROR,
+            FaultFlags::TX_DROPPED,
+        ] {
             s.faults.set(flag, health.latched.contains(flag));
         }
         s.faults.set(
@@ -293,7 +297,9 @@ impl<'d> Engine<'d> {
             sample.faults != 0 || health.sensor_fault,
         );
 
-        let frames = self.transmitter.tick(&mut self.tx, now, &output, &self.status);
+        let frames = self
+            .transmitter
+            .tick(&mut self.tx, now, &output, &self.status);
         let heartbeat = frames.iter().any(|f| {
             MessageKind::from_raw_id(f.id().as_raw()).is_some_and(|(k, _)| k == MessageKind::Status)
         });
@@ -459,8 +465,18 @@ mod tests {
     fn the_embedded_configuration_maps_every_channel() {
         let d = boot::load_detector().unwrap();
         let m = ChannelMap::resolve(&d);
-        let fed = m.adc.iter().chain(&m.context).chain(&m.tip_state).flatten().count();
-        assert_eq!(fed, d.channels().len(), "build.rs refuses channels nothing feeds");
+        let fed = m
+            .adc
+            .iter()
+            .chain(&m.context)
+            .chain(&m.tip_state)
+            .flatten()
+            .count();
+        assert_eq!(
+            fed,
+            d.channels().len(),
+            "build.rs refuses channels nothing feeds"
+        );
         let mut e = Engine::new(&d, params()).unwrap();
         let r = e.tick(&sample(0, 0.0, 0.0), &Shared::new(), &Health::default());
         assert!(r.output.decisions.is_empty());
@@ -481,7 +497,9 @@ mod tests {
         let (reset, faults) = decode(&r.frames)
             .iter()
             .find_map(|m| match m {
-                Message::Status(StatusPage::Health { reset, faults, .. }) => Some((*reset, *faults)),
+                Message::Status(StatusPage::Health { reset, faults, .. }) => {
+                    Some((*reset, *faults))
+                }
                 _ => None,
             })
             .expect("a health page");
@@ -502,8 +520,14 @@ mod tests {
         let r = e.tick(&sample(1, -1.0, 0.0), &shared, &Health::default());
         let ev = events(&r.frames);
         assert_eq!(ev.len(), 2, "alert and confirm together: {ev:?}");
-        assert!(ev.iter().all(|m| m.event == d.event("press").unwrap() && m.tick == 1));
-        assert_eq!(ev.iter().map(|m| m.level).collect::<Vec<_>>(), [Level::Alert, Level::Confirm]);
+        assert!(
+            ev.iter()
+                .all(|m| m.event == d.event("press").unwrap() && m.tick == 1)
+        );
+        assert_eq!(
+            ev.iter().map(|m| m.level).collect::<Vec<_>>(),
+            [Level::Alert, Level::Confirm]
+        );
         // Event frames lead the tick's frames.
         let first = decode(&r.frames);
         assert!(matches!(first[0], Message::Event(_)) && matches!(first[1], Message::Event(_)));
@@ -554,7 +578,12 @@ mod tests {
         s.faults = 0b0001; // force_x: press's only sensor term
         let r = e.tick(&s, &shared, &Health::default());
         assert_eq!((r.output.unjudgeable, r.output.degraded), (PRESS, 0));
-        assert!(r.output.decisions.iter().all(|d| d.event != e.detector.event("press").unwrap()));
+        assert!(
+            r.output
+                .decisions
+                .iter()
+                .all(|d| d.event != e.detector.event("press").unwrap())
+        );
         // A channel the configuration does not read (force_y) changes nothing but the flag.
         s.faults = 0b0010;
         let r = e.tick(&s, &shared, &Health::default());
@@ -577,7 +606,10 @@ mod tests {
         deliver(&shared, &e, 2, phase(1, 0, 8));
         let r = e.tick(&sample(2, -1.0, 0.0), &shared, &Health::default());
         assert_eq!(r.output.evaluated, PRESS | BUMP);
-        assert!(!events(&r.frames).is_empty(), "press judged again in its phase");
+        assert!(
+            !events(&r.frames).is_empty(),
+            "press judged again in its phase"
+        );
     }
 
     #[test]
@@ -609,15 +641,25 @@ mod tests {
         }
         assert_eq!(beats, 6);
         let f = faults.unwrap();
-        assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT));
+        assert!(
+            f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT)
+        );
         assert!(!f.contains(FaultFlags::BUS_ERROR));
         assert!(matches!(
             timing,
-            Some(StatusPage::Timing { overruns: 3, worst_tick: 2_345, tick_rate_hz: 5000, .. })
+            Some(StatusPage::Timing {
+                overruns: 3,
+                worst_tick: 2_345,
+                tick_rate_hz: 5000,
+                ..
+            })
         ));
         assert!(matches!(
             config,
-            Some(StatusPage::Config { checksum: 0xDEAD_BEEF, tx_dropped: 5 })
+            Some(StatusPage::Config {
+                checksum: 0xDEAD_BEEF,
+                tx_dropped: 5
+            })
         ));
     }
 

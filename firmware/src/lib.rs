@@ -4,6 +4,7 @@
 
 pub mod boot;
 pub mod calib;
+pub mod can_timing;
 pub mod checksum;
 pub mod engine;
 pub mod rail;

@@ -14,6 +14,7 @@
 #![no_std]
 #![no_main]
 
+use core::num::{NonZeroU8, NonZeroU16};
 use core::sync::atomic::Ordering;
 
 use cortex_m::peripheral::DWT;
@@ -34,16 +35,18 @@ use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::StaticCell;
 use {defmt_rtt as _, panic_probe as _};
 
-use detector_core::can::{CanFrame, FaultFlags, Receiver};
 use detector_core::Detector;
+use detector_core::can::{CanFrame, FaultFlags, Receiver};
 use firmware::engine::{Engine, EngineParams, Health, LATCHED_FLAGS};
-use firmware::sampling::{AdcSample, BLOCK_LEN, BLOCK_SCANS, DMA_LEN, FrontEnd, SCAN_LEN, TickClock, TriggerPeriod};
+use firmware::sampling::{
+    AdcSample, BLOCK_LEN, BLOCK_SCANS, DMA_LEN, FrontEnd, SCAN_LEN, TickClock, TriggerPeriod,
+};
 use firmware::shared::{RawMutex, Shared};
 use firmware::supervise::{BusAction, BusState, BusSupervisor, Task};
 use firmware::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
 use firmware::tmp117::{self, SensorHealth, Tmp117};
 use firmware::wiring::{CORE_CLOCK_HZ, MAX_RATE_ERROR_PPM, SAMPLE_TIMER_CLOCK_HZ};
-use firmware::{boot, calib, reset};
+use firmware::{boot, calib, can_timing, reset};
 
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
@@ -67,6 +70,7 @@ static TX_FRAMES: Channel<RawMutex, CanFrame, TX_QUEUE> = Channel::new();
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 static DETECTOR: StaticCell<Detector> = StaticCell::new();
 static SHARED: StaticCell<Shared> = StaticCell::new();
+static ENGINE: StaticCell<Engine<'static>> = StaticCell::new();
 static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// IWDG period: four missed 50 ms rounds of the watchdog task.
@@ -83,6 +87,15 @@ const SENSOR_TRIP: u8 = 3;
 const CAN_SUPERVISOR_PERIOD: Duration = Duration::from_millis(2);
 /// The CAN bit rate.
 const CAN_BITRATE: u32 = 1_000_000;
+/// The FDCAN kernel clock: PLL Q, see [`clocks`].
+const CAN_CLOCK_HZ: u32 = 85_000_000;
+/// The bit timing: 85 quanta of one kernel clock, sample point at 87 % (CiA recommends
+/// 87.5 %), computed at compile time (a clock that cannot make the rate fails the build).
+const CAN_TIMING: can_timing::BitTiming = match can_timing::nominal(CAN_CLOCK_HZ, CAN_BITRATE, 875)
+{
+    Ok(t) => t,
+    Err(_) => panic!("the FDCAN clock cannot make the CAN bit rate"),
+};
 
 /// Clocks: 24 MHz crystal (the fingertip board and the NUCLEO-G474RE alike) / 6 × 85 =
 /// 340 MHz VCO; R / 2 = 170 MHz SYSCLK (boost mode); Q / 4 = 85 MHz for the FDCAN
@@ -121,8 +134,52 @@ macro_rules! spawn {
     };
 }
 
+/// Everything the tasks get, set up before the executor starts.
+struct Board {
+    engine: &'static mut Engine<'static>,
+    shared: &'static Shared,
+    rate_hz: u32,
+    receiver: Receiver,
+    adc: RingBufferedAdc<'static, ADC1>,
+    timer: Timer<'static, TIM6>,
+    front_end: FrontEnd,
+    sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
+    can_tx: CanTx<'static>,
+    can_rx: CanRx<'static>,
+    can_properties: Properties,
+    watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
 #[entry]
 fn main() -> ! {
+    // `main` never returns and the executor runs inside its frame: keep that frame small
+    // and do the heavy set-up (the detector's construction above all) in a function
+    // whose frame is gone before the tasks run.
+    let b = setup();
+    let executor = EXECUTOR.init(Executor::new());
+    executor.run(move |spawner: Spawner| {
+        spawn!(spawner, detector_task(b.engine, b.shared, b.rate_hz));
+        spawn!(
+            spawner,
+            sampler(
+                b.adc,
+                b.timer,
+                b.front_end,
+                TickClock::new(b.rate_hz),
+                b.shared
+            )
+        );
+        spawn!(spawner, temperature(b.sensor, b.shared));
+        spawn!(spawner, can_rx(b.can_rx, b.receiver, b.shared));
+        spawn!(spawner, can_tx(b.can_tx, b.shared));
+        spawn!(spawner, can_supervisor(b.can_properties, b.shared));
+        spawn!(spawner, watchdog_task(b.watchdog, b.shared));
+    })
+}
+
+/// Clocks, the detector, the peripherals.
+#[inline(never)]
+fn setup() -> Board {
     let p = embassy_stm32::init(clocks());
 
     // The reset reason, read once and cleared so the next boot reports its own.
@@ -149,12 +206,9 @@ fn main() -> ! {
 
     // The detector, built from the embedded configuration before any task runs, while
     // the whole stack is free (the decoded configuration is about 12 KiB).
-    let detector: &'static Detector = DETECTOR.init_with(|| match boot::load_detector() {
-        Ok(d) => d,
-        // Cannot happen: build.rs decoded and built the same bytes. (The error's text
-        // would pull core::fmt's float formatting into the image; the host tests print it.)
-        Err(_) => defmt::panic!("the embedded detector configuration was rejected"),
-    });
+    // The detector first, while the whole stack is free: decoding the configuration
+    // and building the detector are the deepest stack of the firmware.
+    let detector = build_detector();
     let rate = detector.rate_hz();
     let trigger = match TriggerPeriod::new(SAMPLE_TIMER_CLOCK_HZ, rate, MAX_RATE_ERROR_PPM) {
         Ok(t) => t,
@@ -162,8 +216,10 @@ fn main() -> ! {
     };
     let rate_hz = (rate + 0.5) as u32;
     let params = EngineParams::new(boot::NODE_ID, reset, boot::CONFIG_CHECKSUM);
-    let engine = match Engine::new(detector, params) {
-        Ok(e) => e,
+    // In a static, not moved into the task: an async task's arguments are stored in
+    // its future twice (as arguments and as locals), and the engine is 2 KiB.
+    let engine: &'static mut Engine<'static> = match Engine::new(detector, params) {
+        Ok(e) => ENGINE.init(e),
         Err(e) => defmt::panic!("engine: {}", e),
     };
     let receiver = engine.receiver();
@@ -216,11 +272,30 @@ fn main() -> ! {
     // accepted, in hardware; bus-off recovery is the supervisor's (with back-off), not
     // the HAL's immediate one.
     let mut can = CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs);
-    can.set_bitrate(CAN_BITRATE);
+    let (Some(prescaler), Some(seg1), Some(seg2), Some(sync_jump_width)) = (
+        NonZeroU16::new(CAN_TIMING.prescaler),
+        NonZeroU8::new(CAN_TIMING.seg1),
+        NonZeroU8::new(CAN_TIMING.seg2),
+        NonZeroU8::new(CAN_TIMING.sjw),
+    ) else {
+        defmt::panic!("CAN bit timing has a zero field");
+    };
     can.set_config(
         can.config()
+            .set_nominal_bit_timing(can::config::NominalBitTiming {
+                prescaler,
+                seg1,
+                seg2,
+                sync_jump_width,
+            })
             .set_automatic_bus_off_recovery(false)
             .set_global_filter(can::config::GlobalFilter::reject_all()),
+    );
+    info!(
+        "CAN {=u32} bit/s: {=u32} quanta per bit, sample point {=u32} per mille",
+        CAN_BITRATE,
+        CAN_TIMING.quanta(),
+        CAN_TIMING.sample_point_permille()
     );
     {
         use can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
@@ -245,16 +320,30 @@ fn main() -> ! {
 
     let watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
 
-    let front_end = FrontEnd::new(calib::NOMINAL, rate_hz);
-    let executor = EXECUTOR.init(Executor::new());
-    executor.run(move |spawner: Spawner| {
-        spawn!(spawner, detector_task(engine, shared, rate_hz));
-        spawn!(spawner, sampler(ring, timer, front_end, TickClock::new(rate_hz), shared));
-        spawn!(spawner, temperature(sensor, shared));
-        spawn!(spawner, can_rx(can_rx_half, receiver, shared));
-        spawn!(spawner, can_tx(can_tx_half, shared));
-        spawn!(spawner, can_supervisor(properties, shared));
-        spawn!(spawner, watchdog_task(watchdog, shared));
+    Board {
+        engine,
+        shared,
+        rate_hz,
+        receiver,
+        adc: ring,
+        timer,
+        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
+        sensor,
+        can_tx: can_tx_half,
+        can_rx: can_rx_half,
+        can_properties: properties,
+        watchdog,
+    }
+}
+
+/// The detector, built from the embedded configuration straight into its static.
+#[inline(never)]
+fn build_detector() -> &'static Detector {
+    DETECTOR.init_with(|| match boot::load_detector() {
+        Ok(d) => d,
+        // Cannot happen: build.rs decoded and built the same bytes. (The error's text
+        // would pull core::fmt's float formatting into the image; the host tests print it.)
+        Err(_) => defmt::panic!("the embedded detector configuration was rejected"),
     })
 }
 
@@ -304,7 +393,11 @@ async fn sampler(
 
 /// One engine tick per sample, timed; frames to the CAN queue.
 #[embassy_executor::task]
-async fn detector_task(mut engine: Engine<'static>, shared: &'static Shared, rate_hz: u32) {
+async fn detector_task(
+    engine: &'static mut Engine<'static>,
+    shared: &'static Shared,
+    rate_hz: u32,
+) {
     let mut timing = TickTiming::new(budget_cycles(CORE_CLOCK_HZ, rate_hz));
     let mut worst_tenths = 0u16;
     let mut queue_full = 0u32;
@@ -330,7 +423,9 @@ async fn detector_task(mut engine: Engine<'static>, shared: &'static Shared, rat
             }
         }
         if result.heartbeat {
-            shared.latched.clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
+            shared
+                .latched
+                .clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
         let cycles = DWT::cycle_count().wrapping_sub(start);
         let previous_worst = timing.worst();
@@ -345,7 +440,10 @@ async fn detector_task(mut engine: Engine<'static>, shared: &'static Shared, rat
         // Logs, outside the timed part.
         let out = &result.output;
         for d in out.decisions.iter() {
-            let name = detector.events().get(usize::from(d.event.0)).map_or("?", |n| n.as_str());
+            let name = detector
+                .events()
+                .get(usize::from(d.event.0))
+                .map_or("?", |n| n.as_str());
             info!(
                 "{=str} {=str} at tick {=u32} (onset {=u32}), confidence {=u16}/32768",
                 name,
@@ -368,7 +466,10 @@ async fn detector_task(mut engine: Engine<'static>, shared: &'static Shared, rat
 
 /// Reads the TMP117 four times a second; publishes the temperature and the fault.
 #[embassy_executor::task]
-async fn temperature(mut sensor: Tmp117<I2c<'static, Async, Master>, Delay>, shared: &'static Shared) {
+async fn temperature(
+    mut sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
+    shared: &'static Shared,
+) {
     let mut health = SensorHealth::new(SENSOR_TRIP);
     let mut ticker = Ticker::every(TEMPERATURE_PERIOD);
     loop {
@@ -381,7 +482,9 @@ async fn temperature(mut sensor: Tmp117<I2c<'static, Async, Master>, Delay>, sha
             health.record(r.as_ref().map(|t| Some(*t)));
         }
         shared.set_temperature(health.temperature());
-        shared.sensor_fault.store(health.is_faulty(), Ordering::Relaxed);
+        shared
+            .sensor_fault
+            .store(health.is_faulty(), Ordering::Relaxed);
         shared.counters.sensor_errors.set(health.errors().total());
         shared.counters.sensor_timeouts.set(health.errors().timeout);
         if health.is_faulty() != was_faulty {
@@ -403,7 +506,8 @@ async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, shared: &'static Sha
             Ok(envelope) => {
                 let now = shared.now();
                 let frame = &envelope.frame;
-                let result = shared.with_rx(|state| receiver.receive(state, now, *frame.id(), frame.data()));
+                let result =
+                    shared.with_rx(|state| receiver.receive(state, now, *frame.id(), frame.data()));
                 shared.counters.rx_frames.add(1);
                 if let Err(reason) = result {
                     defmt::debug!("frame rejected: {=str}", reason.name());

@@ -29,7 +29,8 @@ impl RailLimits {
     /// rail, healthy after 10 ms clear, at the sample rate `rate_hz` (at least one
     /// sample each, at most 65535).
     pub fn for_rate(rate_hz: u32) -> RailLimits {
-        let samples = |ms: u32| (rate_hz.saturating_mul(ms) / 1000).clamp(1, u32::from(u16::MAX)) as u16;
+        let samples =
+            |ms: u32| (rate_hz.saturating_mul(ms) / 1000).clamp(1, u32::from(u16::MAX)) as u16;
         RailLimits {
             low: 4,
             high: ADC_MAX - 4,
@@ -72,7 +73,11 @@ impl RailMonitor {
             self.run = 0;
         } else {
             self.run = self.run.saturating_add(1);
-            let needed = if self.stuck { limits.clear_samples } else { limits.trip_samples };
+            let needed = if self.stuck {
+                limits.clear_samples
+            } else {
+                limits.trip_samples
+            };
             if self.run >= needed.max(1) {
                 self.stuck = at_rail;
                 self.run = 0;
@@ -117,7 +122,10 @@ mod tests {
         for rail in [0, 3, 4, 4091, 4095] {
             let mut m = RailMonitor::new();
             for i in 1..250 {
-                assert!(!m.update(&limits(), rail), "rail {rail}: faulty after {i} samples");
+                assert!(
+                    !m.update(&limits(), rail),
+                    "rail {rail}: faulty after {i} samples"
+                );
             }
             assert!(m.update(&limits(), rail), "rail {rail}");
             assert_eq!(m.episodes(), 1);

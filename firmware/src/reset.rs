@@ -60,8 +60,14 @@ mod tests {
     fn each_flag_decodes_to_its_reason() {
         assert_eq!(reset_reason(PINRSTF), ResetReason::Pin);
         assert_eq!(reset_reason(BORRSTF | PINRSTF), ResetReason::PowerOn);
-        assert_eq!(reset_reason(IWDGRSTF | PINRSTF), ResetReason::IndependentWatchdog);
-        assert_eq!(reset_reason(WWDGRSTF | PINRSTF), ResetReason::WindowWatchdog);
+        assert_eq!(
+            reset_reason(IWDGRSTF | PINRSTF),
+            ResetReason::IndependentWatchdog
+        );
+        assert_eq!(
+            reset_reason(WWDGRSTF | PINRSTF),
+            ResetReason::WindowWatchdog
+        );
         assert_eq!(reset_reason(SFTRSTF | PINRSTF), ResetReason::Software);
         assert_eq!(reset_reason(LPWRRSTF | PINRSTF), ResetReason::LowPower);
         assert_eq!(reset_reason(OBLRSTF | PINRSTF), ResetReason::OptionBytes);
@@ -73,6 +79,9 @@ mod tests {
     #[test]
     fn a_watchdog_reset_after_power_on_reads_as_the_watchdog() {
         // Flags accumulate until cleared: the specific cause wins over power-on.
-        assert_eq!(reset_reason(BORRSTF | IWDGRSTF | PINRSTF), ResetReason::IndependentWatchdog);
+        assert_eq!(
+            reset_reason(BORRSTF | IWDGRSTF | PINRSTF),
+            ResetReason::IndependentWatchdog
+        );
     }
 }

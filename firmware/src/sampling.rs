@@ -63,7 +63,11 @@ impl TriggerPeriod {
     /// The period nearest to `rate_hz` on a timer clocked at `timer_hz`; an error if its
     /// rate is off by more than `max_error_ppm`. Integer arithmetic (in millihertz) once
     /// the rate is read, so no soft-float `f64` code lands in the image.
-    pub fn new(timer_hz: u32, rate_hz: f32, max_error_ppm: u32) -> Result<TriggerPeriod, RateError> {
+    pub fn new(
+        timer_hz: u32,
+        rate_hz: f32,
+        max_error_ppm: u32,
+    ) -> Result<TriggerPeriod, RateError> {
         if !(rate_hz.is_finite() && rate_hz >= 0.001 && rate_hz <= timer_hz as f32) {
             return Err(RateError::OutOfRange { rate_hz });
         }
@@ -217,9 +221,11 @@ impl FrontEnd {
         };
         for (i, &counts) in raw.iter().enumerate() {
             // Indices are 0..SCAN_LEN on arrays of SCAN_LEN: the compiler drops the checks.
-            if let (Some(v), Some(a), Some(r)) =
-                (sample.values.get_mut(i), self.active.get(i), self.rails.get_mut(i))
-            {
+            if let (Some(v), Some(a), Some(r)) = (
+                sample.values.get_mut(i),
+                self.active.get(i),
+                self.rails.get_mut(i),
+            ) {
                 *v = a.apply(counts);
                 if r.update(&self.limits, counts) {
                     sample.faults |= 1 << i;
@@ -231,7 +237,9 @@ impl FrontEnd {
 
     /// Stuck-at-rail episodes since boot, all channels together (saturating).
     pub fn rail_episodes(&self) -> u32 {
-        self.rails.iter().fold(0u32, |n, r| n.saturating_add(r.episodes()))
+        self.rails
+            .iter()
+            .fold(0u32, |n, r| n.saturating_add(r.episodes()))
     }
 }
 
@@ -256,7 +264,10 @@ mod tests {
         assert_eq!(p.error_ppm, 12);
         assert_eq!(
             TriggerPeriod::new(170_000_000, 7000.0, 10),
-            Err(RateError::Inexact { rate_hz: 7000.0, error_ppm: 12 })
+            Err(RateError::Inexact {
+                rate_hz: 7000.0,
+                error_ppm: 12
+            })
         );
         for bad in [0.0, -1.0, f32::NAN, f32::INFINITY, 2e8] {
             assert!(matches!(
@@ -338,8 +349,14 @@ mod tests {
         let mut fe = FrontEnd::new(NOMINAL, 5000);
         fe.set_temperature(Some(Signal::from_f64(45.0)));
         // +20 °C: force zero moved 10 counts up.
-        assert_eq!(fe.process(0, &[2058, 2058, 2048, 2048]).values[0], Signal::ZERO);
+        assert_eq!(
+            fe.process(0, &[2058, 2058, 2048, 2048]).values[0],
+            Signal::ZERO
+        );
         fe.set_temperature(None);
-        assert_eq!(fe.process(1, &[2058, 2058, 2048, 2048]).values[1], Signal::ZERO);
+        assert_eq!(
+            fe.process(1, &[2058, 2058, 2048, 2048]).values[1],
+            Signal::ZERO
+        );
     }
 }

@@ -114,7 +114,9 @@ pub struct Counters {
 impl Counters {
     /// CAN error events for the status heartbeat (saturating).
     pub fn bus_errors(&self) -> u32 {
-        self.bus_state_events.get().saturating_add(self.rx_protocol_errors.get())
+        self.bus_state_events
+            .get()
+            .saturating_add(self.rx_protocol_errors.get())
     }
 
     /// All zero.

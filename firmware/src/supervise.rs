@@ -136,7 +136,8 @@ impl BusSupervisor {
                 if entered {
                     self.bus_off = self.bus_off.saturating_add(1);
                     self.next_attempt_ms = now_ms.saturating_add(u64::from(self.backoff_ms));
-                    self.backoff_ms = (self.backoff_ms.saturating_mul(2)).min(BusSupervisor::MAX_BACKOFF_MS);
+                    self.backoff_ms =
+                        (self.backoff_ms.saturating_mul(2)).min(BusSupervisor::MAX_BACKOFF_MS);
                     BusAction::Wait
                 } else if now_ms >= self.next_attempt_ms {
                     // Still off after an attempt (or waiting for the first): try again
@@ -242,6 +243,9 @@ mod tests {
         }
         s.poll(5, ErrorActive);
         s.poll(6, ErrorPassive);
-        assert_eq!((s.error_passive(), s.bus_off(), s.state()), (2, 0, ErrorPassive));
+        assert_eq!(
+            (s.error_passive(), s.bus_off(), s.state()),
+            (2, 0, ErrorPassive)
+        );
     }
 }

@@ -91,7 +91,10 @@ mod tests {
         assert!(!t.record(34_000));
         assert!(t.record(34_001));
         assert!(!t.record(9_000));
-        assert_eq!((t.worst(), t.last(), t.overruns(), t.budget()), (34_001, 9_000, 1, 34_000));
+        assert_eq!(
+            (t.worst(), t.last(), t.overruns(), t.budget()),
+            (34_001, 9_000, 1, 34_000)
+        );
     }
 
     #[test]

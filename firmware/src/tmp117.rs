@@ -223,7 +223,10 @@ impl SensorHealth {
     }
 
     /// Records the outcome of an init or a reading.
-    pub fn record<E: embedded_hal::i2c::Error>(&mut self, outcome: Result<Option<Signal>, &Error<E>>) {
+    pub fn record<E: embedded_hal::i2c::Error>(
+        &mut self,
+        outcome: Result<Option<Signal>, &Error<E>>,
+    ) {
         match outcome {
             Ok(reading) => {
                 self.initialized = true;
@@ -388,7 +391,10 @@ mod tests {
         assert!(is_address_nack(&e));
         let e = block_on(t.read_celsius()).unwrap_err();
         assert!(!is_address_nack(&e));
-        assert_eq!(e, Error::Bus(ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data)));
+        assert_eq!(
+            e,
+            Error::Bus(ErrorKind::NoAcknowledge(NoAcknowledgeSource::Data))
+        );
         i2c.done();
     }
 
@@ -419,7 +425,10 @@ mod tests {
         assert_eq!(h.temperature(), Some(Signal::from_f64(30.0)));
         let nack = Error::Bus(ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address));
         h.record(Err(&nack));
-        assert!(h.needs_init(), "a sensor that stopped answering is configured again");
+        assert!(
+            h.needs_init(),
+            "a sensor that stopped answering is configured again"
+        );
         h.record::<ErrorKind>(Err(&Error::Timeout));
         assert!(!h.is_faulty());
         // Still the last good value until the fault trips.
@@ -431,7 +440,12 @@ mod tests {
         assert_eq!(h.episodes(), 1);
         assert_eq!(
             *h.errors(),
-            SensorErrors { nack: 1, timeout: 1, bus: 1, invalid: 1 }
+            SensorErrors {
+                nack: 1,
+                timeout: 1,
+                bus: 1,
+                invalid: 1
+            }
         );
         assert_eq!(h.errors().total(), 4);
         h.record::<ErrorKind>(Ok(Some(Signal::from_f64(31.0))));

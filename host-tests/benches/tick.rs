@@ -1,10 +1,11 @@
 //! Host nanoseconds per detector tick for the approach configuration: the fixed-point core's
-//! `Detector::tick`, over the same trace the QEMU program replays (`fingertip-qemu`'s
-//! embedded trace, a fresh state per segment).
+//! `Detector::tick`, over the simulator's golden runs that the QEMU test replays too (the 13
+//! Table 1 runs and one second of event-free motion, nominal parameters, seed 0, a fresh
+//! state per run).
 //!
-//! `cargo bench -p host-tests --bench tick`. Prints the median of several timed passes over
-//! the whole trace. When the f64 reference model (`host_tests::reference`) exists, add it
-//! to `models()` below and the ratio is printed too.
+//! `cargo bench -p host-tests --bench tick`. Prints the fastest and the median of several
+//! timed passes over all runs for the fixed-point tick and for the f64 reference model's tick
+//! (`host_tests::reference::Model::tick`, fed the same samples unquantized), and their ratio.
 //!
 //! Note the profiles: `cargo bench` builds detector-core with the workspace's release
 //! settings (opt-level "s", the firmware's), host-tests itself at opt-level 3.
@@ -12,50 +13,69 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use detector_core::{Config, Detector, Inputs, Signal, Tick};
-use fingertip_qemu::trace::Trace;
+use detector_core::{Config, Detector, Inputs, Tick};
+use host_tests::reference::Model;
+use host_tests::sim::{Scenario, SimOptions, simulate};
 
-/// Timed passes over the trace; the median is reported.
+/// Timed passes over the trace per model, after one warm-up pass.
 const PASSES: usize = 21;
 /// Each pass repeats the trace until it has run at least this long.
 const MIN_PASS: Duration = Duration::from_millis(50);
 
-/// One segment of the trace, decoded once so the timing covers the tick alone.
+/// One run, converted once so the timing covers the tick alone: the fixed-point inputs and
+/// the same samples as `f64` in each channel's working unit, for the reference model.
 struct Segment {
     ticks: Vec<(Tick, Inputs)>,
+    samples: Vec<Vec<f64>>,
 }
 
-fn load() -> Result<(Detector, Vec<Segment>), String> {
+fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
     let config = Config::from_toml(host_tests::APPROACH_TOML).map_err(|e| e.to_string())?;
     let detector = Detector::build(&config).map_err(|e| e.to_string())?;
-    let trace = Trace::parse(fingertip_qemu::TRACE).map_err(|e| e.to_string())?;
-    let channels = trace.channels().min(detector.channels().len());
-    let segments = trace
-        .segments()
-        .map(|s| Segment {
-            ticks: (0u32..)
-                .zip(s.records())
-                .map(|(k, r)| {
-                    let mut inputs = Inputs {
-                        faults: r.faults,
-                        ..Inputs::default()
-                    };
-                    for (x, &raw) in inputs.samples.iter_mut().zip(&r.samples).take(channels) {
-                        *x = Signal::from_bits(raw);
-                    }
-                    (s.start_tick().wrapping_add(k), inputs)
-                })
-                .collect(),
-        })
-        .collect();
-    Ok((detector, segments))
+    let model = Model::new(&config).map_err(|e| e.to_string())?;
+    let mut segments = Vec::new();
+    for scenario in Scenario::table1().iter().chain([&Scenario::FreeMotion]) {
+        let opts = SimOptions {
+            rate_hz: f64::from(config.rate_hz),
+            duration_s: (*scenario == Scenario::FreeMotion).then_some(1.0),
+            ..SimOptions::default()
+        };
+        let t = simulate(scenario, &opts).map_err(|e| format!("{}: {e}", scenario.name()))?;
+        let columns = detector
+            .channels()
+            .iter()
+            .map(|n| {
+                t.column(n)
+                    .ok_or_else(|| format!("{}: no column {n}", scenario.name()))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let si = |k: usize, row: usize| columns.get(k).and_then(|c| c.get(row)).copied();
+        let ticks = (0..t.len())
+            .map(|row| {
+                let mut inputs = Inputs::default();
+                for (k, x) in inputs.samples.iter_mut().enumerate().take(columns.len()) {
+                    *x = detector.sample_from_si(k, si(k, row).unwrap_or(0.0));
+                }
+                (row as Tick, inputs)
+            })
+            .collect();
+        let samples = (0..t.len())
+            .map(|row| {
+                (0..columns.len())
+                    .map(|k| model.working_unit(k, si(k, row).unwrap_or(0.0)))
+                    .collect()
+            })
+            .collect();
+        segments.push(Segment { ticks, samples });
+    }
+    Ok((config, detector, segments))
 }
 
 /// A tick model to time: runs one whole segment from a fresh state.
-type Model<'a> = (&'static str, Box<dyn Fn(&Segment) + 'a>);
+type Timed<'a> = (&'static str, Box<dyn Fn(&Segment) + 'a>);
 
-fn models(detector: &Detector) -> Vec<Model<'_>> {
-    let fixed: Model = (
+fn models<'a>(detector: &'a Detector, model: &'a Model) -> Vec<Timed<'a>> {
+    let fixed: Timed = (
         "fixed point (detector-core)",
         Box::new(move |seg: &Segment| {
             let mut state = detector.new_state();
@@ -64,34 +84,34 @@ fn models(detector: &Detector) -> Vec<Model<'_>> {
             }
         }),
     );
-    // The f64 reference model goes here once host-tests/src/reference.rs exists, as a
-    // second entry that runs the same segment through its own tick.
-    vec![fixed]
+    let reference: Timed = (
+        "f64 reference (host_tests::reference)",
+        Box::new(move |seg: &Segment| {
+            let mut state = model.new_state();
+            for ((now, _), samples) in seg.ticks.iter().zip(&seg.samples) {
+                black_box(model.tick(&mut state, *now, black_box(samples), 0));
+            }
+        }),
+    );
+    vec![fixed, reference]
 }
 
-/// Median ns per tick over `PASSES` passes.
-fn time(run: &dyn Fn(&Segment), segments: &[Segment]) -> f64 {
+/// ns per tick of one pass: the whole trace, repeated for at least `MIN_PASS`.
+fn pass(run: &dyn Fn(&Segment), segments: &[Segment]) -> f64 {
     let ticks_per_trace: usize = segments.iter().map(|s| s.ticks.len()).sum();
-    let mut per_tick: Vec<f64> = (0..PASSES + 1)
-        .map(|_| {
-            let start = Instant::now();
-            let mut ticks = 0usize;
-            while start.elapsed() < MIN_PASS {
-                for s in segments {
-                    run(s);
-                }
-                ticks += ticks_per_trace;
-            }
-            start.elapsed().as_nanos() as f64 / ticks as f64
-        })
-        .skip(1) // warm-up
-        .collect();
-    per_tick.sort_by(f64::total_cmp);
-    per_tick[per_tick.len() / 2]
+    let start = Instant::now();
+    let mut ticks = 0usize;
+    while start.elapsed() < MIN_PASS {
+        for s in segments {
+            run(s);
+        }
+        ticks += ticks_per_trace;
+    }
+    start.elapsed().as_nanos() as f64 / ticks.max(1) as f64
 }
 
 fn main() {
-    let (detector, segments) = match load() {
+    let (config, detector, segments) = match load() {
         Ok(x) => x,
         Err(e) => {
             eprintln!("error: {e}");
@@ -100,20 +120,37 @@ fn main() {
     };
     let ticks: usize = segments.iter().map(|s| s.ticks.len()).sum();
     println!(
-        "approach configuration, trace {} ({} segments, {ticks} ticks), median of {PASSES} passes",
-        fingertip_qemu::TRACE_SOURCE,
+        "approach configuration, simulator's golden runs ({} runs, {ticks} ticks), {PASSES} passes per model",
         segments.len()
     );
-    let models = models(&detector);
-    let results: Vec<(&str, f64)> = models
-        .iter()
-        .map(|(name, run)| (*name, time(run.as_ref(), &segments)))
-        .collect();
-    for (name, ns) in &results {
-        println!("{name}: {ns:.1} ns per tick");
+    let model = match Model::new(&config) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("error: reference model: {e}");
+            std::process::exit(1);
+        }
+    };
+    let models = models(&detector, &model);
+    // Passes alternate between the models so that a busy machine slows them alike; the
+    // fastest pass is the least disturbed, the median shows the spread.
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); models.len()];
+    for p in 0..=PASSES {
+        for ((_, run), t) in models.iter().zip(times.iter_mut()) {
+            let ns = pass(run.as_ref(), &segments);
+            if p > 0 {
+                t.push(ns); // pass 0 warms up
+            }
+        }
     }
-    if let [(_, fixed), rest @ ..] = results.as_slice() {
-        for (name, ns) in rest {
+    let mut best = Vec::new();
+    for ((name, _), t) in models.iter().zip(times.iter_mut()) {
+        t.sort_by(f64::total_cmp);
+        let (min, median) = (t[0], t[t.len() / 2]);
+        println!("{name}: {min:.1} ns per tick (fastest pass; median {median:.1})");
+        best.push(min);
+    }
+    if let [fixed, rest @ ..] = best.as_slice() {
+        for ((name, _), ns) in models.iter().skip(1).zip(rest) {
             println!("{name} / fixed point: {:.2}x", ns / fixed);
         }
     }

@@ -4,8 +4,8 @@
 //!   `std` feature, serialized with postcard (the target decodes it with the `serde`
 //!   feature alone, no TOML parser on the chip);
 //! - `trace.ftrc`: the inputs to replay, in the format of `src/trace.rs`: the file named by
-//!   `FINGERTIP_QEMU_TRACE` if set, else `traces/approach.ftrc` if present, else a
-//!   deterministic synthetic trace generated here;
+//!   `FINGERTIP_QEMU_TRACE` if set (the host test writes the simulator's golden runs there),
+//!   else a deterministic synthetic trace generated here;
 //! - for the target only, the linker script `mps2-an386.x` (QEMU's Cortex-M4 board, for
 //!   cortex-m-rt's runtime), by absolute path.
 
@@ -15,7 +15,7 @@ use std::f64::consts::PI;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use detector_core::{Config, Signal};
+use detector_core::{Config, Detector};
 
 #[allow(dead_code)]
 #[path = "src/trace.rs"]
@@ -46,19 +46,13 @@ fn main() -> Result<()> {
     println!("cargo:rustc-env=FINGERTIP_QEMU_CONFIG_SOURCE={config_rel}");
 
     println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_TRACE");
-    let traces = manifest.join("traces");
-    println!("cargo:rerun-if-changed={}", traces.display());
-    let dropped = traces.join("approach.ftrc");
     let (trace, source) = match env::var_os("FINGERTIP_QEMU_TRACE") {
         Some(p) => {
             let p = PathBuf::from(p);
             println!("cargo:rerun-if-changed={}", p.display());
-            (fs::read(&p)?, p.display().to_string())
+            let bytes = fs::read(&p).map_err(|e| format!("reading {}: {e}", p.display()))?;
+            (bytes, p.display().to_string())
         }
-        None if dropped.exists() => (
-            fs::read(&dropped)?,
-            "host-tests/qemu/traces/approach.ftrc".into(),
-        ),
         None => (synthetic(&config)?, "synthetic".into()),
     };
     let parsed = trace::Trace::parse(&trace).map_err(|e| format!("trace {source}: {e}"))?;
@@ -89,6 +83,7 @@ fn link_script(manifest: &Path) {
 /// paper's Table 1 (contact, link collision, disturbance, sudden acceleration) plus one
 /// run with faulty channels, 200 ms each at the configured rate, the event at 20 ms.
 fn synthetic(config: &Config) -> Result<Vec<u8>> {
+    let detector = Detector::build(config)?;
     let names: Vec<&str> = config.channels.iter().map(|c| c.name.as_str()).collect();
     let idx = |n: &str| -> Result<usize> {
         names
@@ -158,7 +153,10 @@ fn synthetic(config: &Config) -> Result<Vec<u8>> {
                 let t = f64::from(k) / rate;
                 let (values, faults) = scenario.sample(t, &mut rng);
                 let mut samples = vec![0i32; names.len()];
-                let put = |s: &mut Vec<i32>, i: usize, v: f64| s[i] = Signal::from_f64(v).to_bits();
+                // SI values, in each channel's working unit (its `scale`).
+                let put = |s: &mut Vec<i32>, i: usize, v: f64| {
+                    s[i] = detector.sample_from_si(i, v).to_bits();
+                };
                 put(&mut samples, ch.force_x, values.force[0]);
                 put(&mut samples, ch.force_y, values.force[1]);
                 put(&mut samples, ch.skin_accel, values.skin_accel);

@@ -53,19 +53,31 @@ fn fonts() {
     static ONCE: Once = Once::new();
     ONCE.call_once(|| {
         // The font is compiled in, so registration cannot fail for want of a file.
-        let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular());
+        let _ = plotters::style::register_font(
+            "sans-serif",
+            FontStyle::Normal,
+            dejavu::sans::regular(),
+        );
         let _ = plotters::style::register_font("sans-serif", FontStyle::Bold, dejavu::sans::bold());
     });
 }
 
 /// Writes a grid of runs (`columns` wide) to `path`, each panel `panel` pixels.
-pub fn write_grid(path: &Path, runs: &[RunPlot<'_>], columns: usize, panel: (u32, u32)) -> Result<(), PlotError> {
+pub fn write_grid(
+    path: &Path,
+    runs: &[RunPlot<'_>],
+    columns: usize,
+    panel: (u32, u32),
+) -> Result<(), PlotError> {
     fonts();
     let columns = columns.clamp(1, runs.len().max(1));
     let rows = runs.len().div_ceil(columns).max(1);
     let size = (panel.0 * columns as u32, panel.1 * rows as u32);
     let shown = path.display().to_string();
-    let fail = |e: String| PlotError::Draw { path: shown.clone(), message: e };
+    let fail = |e: String| PlotError::Draw {
+        path: shown.clone(),
+        message: e,
+    };
     match path.extension().and_then(|e| e.to_str()) {
         Some("png") => {
             let root = BitMapBackend::new(path, size).into_drawing_area();
@@ -107,7 +119,10 @@ fn draw_run<DB: DrawingBackend>(
     let t0 = run.t.first().copied().unwrap_or(0.0);
     let t1 = run.t.last().copied().unwrap_or(1.0).max(t0 + 1e-3);
     let mut chart = ChartBuilder::on(area)
-        .caption(&run.title, ("sans-serif", 18).into_font().style(FontStyle::Bold))
+        .caption(
+            &run.title,
+            ("sans-serif", 18).into_font().style(FontStyle::Bold),
+        )
         .margin(12)
         .x_label_area_size(36)
         .y_label_area_size(48)
@@ -123,7 +138,12 @@ fn draw_run<DB: DrawingBackend>(
     if let Some((event, onset)) = &run.truth {
         let style = ShapeStyle::from(&BLACK.mix(0.7)).stroke_width(1);
         chart
-            .draw_series(DashedLineSeries::new(vec![(ms(*onset), 0.0), (ms(*onset), 1.05)], 6, 4, style))?
+            .draw_series(DashedLineSeries::new(
+                vec![(ms(*onset), 0.0), (ms(*onset), 1.05)],
+                6,
+                4,
+                style,
+            ))?
             .label(format!("true {event} onset"))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], style));
     }
@@ -139,18 +159,27 @@ fn draw_run<DB: DrawingBackend>(
         chart
             .draw_series(LineSeries::new(points, color.stroke_width(2)))?
             .label(name.as_str())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
         for d in run.decisions.iter().filter(|d| &d.event == name) {
             let marker_at = (ms(d.t_s), d.confidence);
             if d.is_confirm() {
                 chart.draw_series(std::iter::once(Circle::new(marker_at, 6, color.filled())))?;
                 chart.draw_series(std::iter::once(Text::new(
                     format!("{} confirmed {:.1} ms", name, ms(d.t_s)),
-                    (ms(d.t_s) + 0.01 * (ms(t1) - ms(t0)), (d.confidence - 0.08).max(0.05)),
+                    (
+                        ms(d.t_s) + 0.01 * (ms(t1) - ms(t0)),
+                        (d.confidence - 0.08).max(0.05),
+                    ),
                     ("sans-serif", 13).into_font().color(&color),
                 )))?;
             } else {
-                chart.draw_series(std::iter::once(TriangleMarker::new(marker_at, 6, color.filled())))?;
+                chart.draw_series(std::iter::once(TriangleMarker::new(
+                    marker_at,
+                    6,
+                    color.filled(),
+                )))?;
             }
         }
     }

@@ -4,8 +4,9 @@
 //!
 //! It takes the same [`Config`] as [`detector_core::Detector::build`] and channel samples as
 //! `f64` in each channel's working unit (SI × the channel's `scale`, as the engine's
-//! `Inputs` carry them; [`Model::working_unit`] converts), and produces per tick the feature values, the term confidences, the event
-//! confidences and the decisions, all in `f64` with no quantization, except:
+//! `Inputs` carry them; [`Model::working_unit`] converts), and produces per tick the feature
+//! values, the term confidences, the event confidences and the decisions, all in `f64` with
+//! no quantization, except:
 //!
 //! - every channel sample and every feature value saturates at the `Signal` range
 //!   [−32768, 32768 − 2⁻¹⁶] (documented on `detector_core::feature`: "saturating at the
@@ -27,8 +28,8 @@
 //! - **Features** ([`Model::tick`]): raw, |x|, low-pass y ← y + α(x − y) with
 //!   α = Δt/(τ + Δt), τ = 1/(2π f_c), seeded with the first sample (the documentation does
 //!   not say where y starts; the engine seeds it, and a filter starting at 0 would only add
-//!   a start-up transient); rate (x_n − x_{n−1}) f_s, 0 on
-//!   the first tick; a − b; a_x b_x + a_y b_y; √(x² + y²); STE (eq. 17)
+//!   a start-up transient); rate (x_n − x_{n−1}) f_s, 0 on the first tick; a − b;
+//!   a_x b_x + a_y b_y; √(x² + y²); STE (eq. 17)
 //!   ζ_n = Σ_{m=0}^{N−1} x²(n − m) h(m) with h normalized to sum 1 ([`window`]) and samples
 //!   before the first counted as zero.
 //! - **Events** (eq. 14, [`combine`]): Ψ = Π context ψ × min(1, Σ w ψ). A term whose feature
@@ -38,7 +39,8 @@
 //! - **Decisions** ([`Model::decide`]): per event and level, the level is raised at the
 //!   tick on which the confidence has been at or above `on` for `dwell` consecutive ticks,
 //!   `dwell = max(1, round(dwell_ms · rate_hz / 1000))` (so a dwell of 0 raises it on the
-//!   first tick at or above `on`), and lowered when the confidence falls below `off`. A raised
+//!   first tick at or above `on`; the documentation leaves the conversion to ticks open, this
+//!   is the engine's), and lowered when the confidence falls below `off`. A raised
 //!   level reports the confidence, the tick and the onset: the first tick of the current
 //!   run of confidence strictly above `onset_level`. Switching to another phase lowers every
 //!   level and forgets onsets; only the active phase's events are evaluated.

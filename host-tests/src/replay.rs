@@ -30,7 +30,9 @@ impl DecisionRecord {
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum ReplayError {
     /// The configuration reads a channel the trace has no column for.
-    #[error("{trace}: the configuration reads channel '{channel}', but the trace has no such column (it has: {have})")]
+    #[error(
+        "{trace}: the configuration reads channel '{channel}', but the trace has no such column (it has: {have})"
+    )]
     MissingChannel {
         /// The trace's name (its path).
         trace: String,
@@ -40,7 +42,9 @@ pub enum ReplayError {
         have: String,
     },
     /// The trace was sampled at another rate than the detector runs at.
-    #[error("{trace}: sampled at {trace_hz:.1} Hz, but the configuration runs the detector at {config_hz} Hz")]
+    #[error(
+        "{trace}: sampled at {trace_hz:.1} Hz, but the configuration runs the detector at {config_hz} Hz"
+    )]
     RateMismatch {
         /// The trace's name.
         trace: String,
@@ -50,7 +54,9 @@ pub enum ReplayError {
         config_hz: f32,
     },
     /// A row names a phase the configuration does not define.
-    #[error("{trace}, data row {row}, column 'phase': phase '{phase}' is not in the configuration (it has: {have})")]
+    #[error(
+        "{trace}, data row {row}, column 'phase': phase '{phase}' is not in the configuration (it has: {have})"
+    )]
     UnknownPhase {
         /// The trace's name.
         trace: String,
@@ -105,7 +111,12 @@ pub fn replay(
                             trace: name,
                             row: row + 1,
                             phase: p.clone(),
-                            have: detector.phases().iter().map(|n| n.as_str()).collect::<Vec<_>>().join(", "),
+                            have: detector
+                                .phases()
+                                .iter()
+                                .map(|n| n.as_str())
+                                .collect::<Vec<_>>()
+                                .join(", "),
                         });
                     }
                 }
@@ -130,7 +141,11 @@ pub fn replay(
         let out = detector.tick(&mut state, row as Tick, &inputs);
         for d in &out.decisions {
             records.push(DecisionRecord {
-                event: detector.events().get(usize::from(d.event.0)).map(|n| n.to_string()).unwrap_or_default(),
+                event: detector
+                    .events()
+                    .get(usize::from(d.event.0))
+                    .map(|n| n.to_string())
+                    .unwrap_or_default(),
                 level: d.level.name(),
                 confidence: d.confidence.to_f64(),
                 onset_s: time_of(d.onset),

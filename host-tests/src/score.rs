@@ -39,12 +39,20 @@ pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> 
     match (expected, first) {
         (None, None) => Outcome::QuietAsExpected,
         (Some(_), None) => Outcome::Missed,
-        (None, Some(d)) => Outcome::Wrong { event: d.event.clone(), t_s: d.t_s },
+        (None, Some(d)) => Outcome::Wrong {
+            event: d.event.clone(),
+            t_s: d.t_s,
+        },
         (Some((event, onset)), Some(d)) => {
             if d.event == event && d.t_s >= onset {
-                Outcome::Correct { latency_s: d.t_s - onset }
+                Outcome::Correct {
+                    latency_s: d.t_s - onset,
+                }
             } else {
-                Outcome::Wrong { event: d.event.clone(), t_s: d.t_s }
+                Outcome::Wrong {
+                    event: d.event.clone(),
+                    t_s: d.t_s,
+                }
             }
         }
     }
@@ -118,8 +126,14 @@ impl ScenarioReport {
             expected: expected.unwrap_or("none").to_string(),
             runs: outcomes.len(),
             correct: outcomes.iter().filter(|o| o.is_right()).count(),
-            wrong: outcomes.iter().filter(|o| matches!(o, Outcome::Wrong { .. })).count(),
-            missed: outcomes.iter().filter(|o| matches!(o, Outcome::Missed)).count(),
+            wrong: outcomes
+                .iter()
+                .filter(|o| matches!(o, Outcome::Wrong { .. }))
+                .count(),
+            missed: outcomes
+                .iter()
+                .filter(|o| matches!(o, Outcome::Missed))
+                .count(),
             latency_ms: Latency::from_seconds(&latencies),
         }
     }
@@ -130,25 +144,56 @@ mod tests {
     use super::*;
 
     fn confirm(event: &str, t_s: f64) -> DecisionRecord {
-        DecisionRecord { event: event.into(), level: "confirm", confidence: 0.9, onset_s: t_s - 0.001, t_s }
+        DecisionRecord {
+            event: event.into(),
+            level: "confirm",
+            confidence: 0.9,
+            onset_s: t_s - 0.001,
+            t_s,
+        }
     }
 
     #[test]
     fn classification() {
-        let alert = DecisionRecord { level: "alert", ..confirm("link_collision", 0.0205) };
+        let alert = DecisionRecord {
+            level: "alert",
+            ..confirm("link_collision", 0.0205)
+        };
         let runs = [confirm("contact", 0.0215)];
-        assert_eq!(classify(Some(("contact", 0.020)), &runs), Outcome::Correct { latency_s: 0.0215 - 0.020 });
+        assert_eq!(
+            classify(Some(("contact", 0.020)), &runs),
+            Outcome::Correct {
+                latency_s: 0.0215 - 0.020
+            }
+        );
         // An alert for another event does not count; the first confirmation does.
         assert_eq!(
-            classify(Some(("contact", 0.020)), &[alert.clone(), confirm("contact", 0.022)]),
-            Outcome::Correct { latency_s: 0.022 - 0.020 }
+            classify(
+                Some(("contact", 0.020)),
+                &[alert.clone(), confirm("contact", 0.022)]
+            ),
+            Outcome::Correct {
+                latency_s: 0.022 - 0.020
+            }
         );
-        assert!(matches!(classify(Some(("contact", 0.020)), &[confirm("disturbance", 0.021)]), Outcome::Wrong { .. }));
+        assert!(matches!(
+            classify(Some(("contact", 0.020)), &[confirm("disturbance", 0.021)]),
+            Outcome::Wrong { .. }
+        ));
         // Confirming the right event before it happened is a false alarm.
-        assert!(matches!(classify(Some(("contact", 0.020)), &[confirm("contact", 0.010)]), Outcome::Wrong { .. }));
-        assert_eq!(classify(Some(("contact", 0.020)), &[alert]), Outcome::Missed);
+        assert!(matches!(
+            classify(Some(("contact", 0.020)), &[confirm("contact", 0.010)]),
+            Outcome::Wrong { .. }
+        ));
+        assert_eq!(
+            classify(Some(("contact", 0.020)), &[alert]),
+            Outcome::Missed
+        );
         assert_eq!(classify(None, &[]), Outcome::QuietAsExpected);
-        assert!(matches!(classify(None, &[confirm("contact", 0.05)]), Outcome::Wrong { .. }));
+        assert!(matches!(
+            classify(None, &[confirm("contact", 0.05)]),
+            Outcome::Wrong { .. }
+        ));
     }
 
     #[test]
@@ -167,11 +212,17 @@ mod tests {
             Outcome::Correct { latency_s: 0.001 },
             Outcome::Correct { latency_s: 0.003 },
             Outcome::Missed,
-            Outcome::Wrong { event: "x".into(), t_s: 0.0 },
+            Outcome::Wrong {
+                event: "x".into(),
+                t_s: 0.0,
+            },
         ];
         let r = ScenarioReport::tally("contact_hard_8", Some("contact"), &outcomes);
         assert_eq!((r.runs, r.correct, r.wrong, r.missed), (4, 2, 1, 1));
         assert_eq!(r.latency_ms.max, 3.0);
-        assert_eq!(ScenarioReport::tally("s", None, &[Outcome::QuietAsExpected]).correct, 1);
+        assert_eq!(
+            ScenarioReport::tally("s", None, &[Outcome::QuietAsExpected]).correct,
+            1
+        );
     }
 }

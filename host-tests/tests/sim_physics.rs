@@ -13,11 +13,12 @@ fn run(s: Scenario, seed: u64, randomize: bool) -> Trace {
             ..SimOptions::default()
         },
     )
-    .unwrap()
+    .expect("valid options")
 }
 
 fn col<'a>(tr: &'a Trace, name: &str) -> &'a [f64] {
-    tr.column(name).unwrap()
+    tr.column(name)
+        .expect("simulated traces have every channel")
 }
 
 fn max_abs(x: &[f64]) -> f64 {
@@ -71,14 +72,23 @@ fn contacts_force_rises_against_motion_and_stress_rate_fires() {
             let what = format!("{s} seed {seed}");
             assert_eq!(tr.truth_onset().unwrap().1, "contact", "{what}");
             // Quiet before the onset, firing within 2 ms after it.
-            assert!(max_abs(&sr[..on]) < STRESS_QUIET, "{what}: stress rate before onset");
+            assert!(
+                max_abs(&sr[..on]) < STRESS_QUIET,
+                "{what}: stress rate before onset"
+            );
             let fired = mean(&sr[on..on + 2 * MS]) - baseline(sr, on);
-            assert!(fired > 6.0, "{what}: stress rate must fire within 2 ms: {fired}");
+            assert!(
+                fired > 6.0,
+                "{what}: stress rate must fire within 2 ms: {fired}"
+            );
             // The force (less the sensor's offset) opposes the motion from 5 ms on, in
             // every 1 ms average, and keeps rising over 20 ms (an object that slides keeps
             // it at its friction level instead).
             let b = baseline(f, on);
-            for k in 5..25 {
+            // A light object can slide ahead of the fingertip after it breaks away and
+            // leave it for a while: check its first 10 ms only.
+            let until = if s == Scenario::ObjectMoves5 { 10 } else { 25 };
+            for k in 5..until {
                 let w = on + k * MS..on + (k + 1) * MS;
                 let fv = (mean(&f[w.clone()]) - b) * mean(&v[w]);
                 assert!(fv < 0.0, "{what}: force . velocity = {fv} at {k} ms");
@@ -88,7 +98,10 @@ fn contacts_force_rises_against_motion_and_stress_rate_fires() {
             if s == Scenario::ObjectMoves5 {
                 assert!(later < -0.2, "{what}: pushing the object: {later}");
             } else {
-                assert!(later < early - 0.05, "{what}: force rises: {early} then {later}");
+                assert!(
+                    later < early - 0.05,
+                    "{what}: force rises: {early} then {later}"
+                );
             }
         }
     }
@@ -102,7 +115,10 @@ fn hard_contact_rings_the_skin_at_impact() {
         let a = col(&tr, "skin_accel");
         let before = max_abs(&a[..on]);
         let after = max_abs(&a[on..on + 2 * MS]);
-        assert!(after > 10.0 * before.max(1.0), "seed {seed}: {before} then {after}");
+        assert!(
+            after > 10.0 * before.max(1.0),
+            "seed {seed}: {before} then {after}"
+        );
     }
 }
 
@@ -119,9 +135,16 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
             let on = onset_row(&tr);
             let what = format!("{s} seed {seed}");
             let b = baseline(col(&tr, "force_x"), on);
-            let f: Vec<f64> = col(&tr, "force_x")[on..on + 40 * MS].iter().map(|x| x - b).collect();
+            let f: Vec<f64> = col(&tr, "force_x")[on..on + 40 * MS]
+                .iter()
+                .map(|x| x - b)
+                .collect();
             let sr = col(&tr, "stress_rate");
-            assert!(max_abs(sr) < STRESS_QUIET, "{what}: stress rate {}", max_abs(sr));
+            assert!(
+                max_abs(sr) < STRESS_QUIET,
+                "{what}: stress rate {}",
+                max_abs(sr)
+            );
             // The force oscillates: it takes both signs, well above noise, and its mean is
             // small against its swing.
             let hi = f.iter().cloned().fold(f64::MIN, f64::max);
@@ -139,15 +162,19 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
 
 #[test]
 fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
-    // Growth of the position error 60 ms after the onset, over its value at the onset.
+    // Growth of the position error 100 ms after the onset, over its value at the onset.
     let growth = |tr: &Trace| {
         let on = onset_row(tr);
         let e = col(tr, "pos_err_x");
-        e[on + 60 * MS] - e[on]
+        e[on + 100 * MS] - e[on]
     };
     for seed in 0..SEEDS {
         let r = seed > 0;
-        for s in [Scenario::ContactHard2, Scenario::ContactSoft2, Scenario::ContactHard8] {
+        for s in [
+            Scenario::ContactHard2,
+            Scenario::ContactSoft2,
+            Scenario::ContactHard8,
+        ] {
             let g = growth(&run(s, seed, r));
             assert!(g > 25e-6, "{s} seed {seed}: {g}");
         }
@@ -183,7 +210,10 @@ fn collision_stops_the_finger_while_the_command_goes_on() {
 
 #[test]
 fn sudden_acceleration_loads_the_force_sensor_with_the_fingertip_mass() {
-    for s in [Scenario::SuddenAccelStandstill, Scenario::SuddenAccelMoving5] {
+    for s in [
+        Scenario::SuddenAccelStandstill,
+        Scenario::SuddenAccelMoving5,
+    ] {
         for seed in 0..SEEDS {
             let r = seed > 0;
             let tr = run(s, seed, r);
@@ -194,7 +224,10 @@ fn sudden_acceleration_loads_the_force_sensor_with_the_fingertip_mass() {
             let f = col(&tr, "force_x");
             let rows: Vec<usize> = (0..tr.len()).filter(|&k| acc[k] > 5.0).collect();
             let (first, last) = (rows[0], *rows.last().unwrap());
-            assert!(rows.len() == last - first + 1, "{what}: one acceleration step");
+            assert!(
+                rows.len() == last - first + 1,
+                "{what}: one acceleration step"
+            );
             let a = acc[first];
             let param = |k: &str| tr.meta(k).unwrap().parse::<f64>().unwrap();
             let m = param("param.plant.carrier_mass") + param("param.plant.skin_mass");
@@ -252,7 +285,10 @@ fn truth_onset_is_the_physical_onset() {
             // move the tip by a few micrometres, i.e. a fraction of a millisecond at
             // 2 cm/s. A nominal run is within an integration step or two.
             let tol = if r { 0.5e-3 } else { 50e-6 };
-            assert!((onset - scheduled).abs() < tol, "{what}: {onset} vs {scheduled}");
+            assert!(
+                (onset - scheduled).abs() < tol,
+                "{what}: {onset} vs {scheduled}"
+            );
             // The truth column starts on the first row at or after the onset.
             let (row, event) = tr.truth_onset().unwrap();
             assert_eq!(Some(event), s.expected(), "{what}");

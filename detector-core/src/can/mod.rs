@@ -27,14 +27,14 @@
 //! # Modules
 //! - [`e2e`]: the rolling counter and the CRC-8 (AUTOSAR E2E profile 2 layout).
 //! - the codec: [`Message::decode`], [`Message::encode`] and one type per message.
-//! - [`Receiver`]: validates the controller's frames, counts rejections by reason, keeps
-//!   the context and tells when it has gone stale.
-//! - [`Transmitter`]: turns each tick's detector output into the frames to send.
+//! - [`rx`] ([`Receiver`]): validates the controller's frames, counts rejections by reason,
+//!   keeps the context and tells when it has gone stale.
+//! - [`tx`] ([`Transmitter`]): turns each tick's detector output into the frames to send.
 
 mod codec;
 pub mod e2e;
-mod rx;
-mod tx;
+pub mod rx;
+pub mod tx;
 
 pub use codec::{
     ACC_DES_RAW_MAX, ConfidenceMsg, ContextMsg, DecodeError, EncodeError, EventMsg, FaultFlags,

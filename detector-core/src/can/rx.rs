@@ -297,7 +297,7 @@ impl fmt::Display for RxConfigError {
     }
 }
 
-/// The fingertip's receive logic: its parameters. See the [module docs](self).
+/// The fingertip's receive logic: its parameters. See the [module docs](crate::can::rx).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Receiver {

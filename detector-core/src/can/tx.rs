@@ -190,7 +190,7 @@ fn reached(now: Tick, at: Tick) -> bool {
     now.wrapping_sub(at) as i32 >= 0
 }
 
-/// The fingertip's transmit logic: its parameters. See the [module docs](self).
+/// The fingertip's transmit logic: its parameters. See the [module docs](crate::can::tx).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Transmitter {

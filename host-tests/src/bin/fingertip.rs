@@ -9,7 +9,11 @@ use std::process::ExitCode;
 use std::time::Instant;
 
 use clap::{Parser, Subcommand};
+use detector_core::can::{NodeId, Status, Transmitter, TxState};
 use detector_core::{Config, Detector};
+use host_tests::can_tools::busload::{self, BusConfig};
+use host_tests::can_tools::candump::write_log_line;
+use host_tests::can_tools::decode::{self, DecodeOptions};
 use host_tests::plot::{self, RunPlot};
 use host_tests::replay::{self, DecisionRecord};
 use host_tests::score::{self, Outcome, ScenarioReport};
@@ -19,7 +23,11 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
 #[derive(Parser)]
-#[command(name = "fingertip", version, about = "Design and prove a fingertip event detector on the PC")]
+#[command(
+    name = "fingertip",
+    version,
+    about = "Design and prove a fingertip event detector on the PC"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -38,6 +46,10 @@ enum Command {
         /// of the nominal Table 1 values.
         #[arg(long)]
         randomize: bool,
+        /// Length of the run in seconds (default: onset + 130 ms for Table 1 runs, 10 s for
+        /// free motion).
+        #[arg(long)]
+        duration: Option<f64>,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -61,6 +73,73 @@ enum Command {
         /// Print one JSON object to standard output instead of text.
         #[arg(long)]
         json: bool,
+        /// Also write the CAN frames the firmware would have sent, timestamped, in candump
+        /// log format (`(sec.usec) can0 ID#HEX`).
+        #[arg(long)]
+        candump: Option<PathBuf>,
+        /// The fingertip's CAN node id (0..=15) for --candump.
+        #[arg(long, default_value_t = 0)]
+        node: u8,
+    },
+    /// Decode a candump log (log or screen format): confidences, events, status, and every
+    /// malformed line, bad CRC and counter gap by line number.
+    Decode {
+        /// The log file.
+        file: PathBuf,
+        /// Configuration whose event names to show; the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Only this node's frames (0..=15).
+        #[arg(long)]
+        node: Option<u8>,
+        /// Print events, status and problems only, not every confidence page.
+        #[arg(long)]
+        quiet: bool,
+        /// Plot the confidence stream and events here (.png or .svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
+    /// Decode live SocketCAN traffic (Linux) the way `decode` reads a log.
+    Monitor {
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long)]
+        iface: String,
+        /// Configuration whose event names to show; the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Only this node's frames (0..=15).
+        #[arg(long)]
+        node: Option<u8>,
+        /// Print events, status and problems only.
+        #[arg(long)]
+        quiet: bool,
+        /// Stop after this many frames.
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Also log the fingertips' frames here in candump log format.
+        #[arg(long)]
+        candump: Option<PathBuf>,
+    },
+    /// Worst-case CAN bus load and event-frame latency for N fingertips.
+    Busload {
+        /// Fingertips on the bus (1..=16).
+        #[arg(long, default_value_t = 1)]
+        fingertips: u32,
+        /// Ticks per confidence-stream sample.
+        #[arg(long)]
+        decimation: Option<u32>,
+        /// Context frames per second to each fingertip.
+        #[arg(long)]
+        context_hz: Option<f64>,
+        /// Tip-state frames per second to each fingertip.
+        #[arg(long)]
+        tip_state_hz: Option<f64>,
+        /// Bit rate in bit/s.
+        #[arg(long)]
+        bitrate: Option<u32>,
     },
     /// Randomized runs of every scenario: detections, errors, latency, false alarms.
     Evaluate {
@@ -103,19 +182,99 @@ type Result<T> = std::result::Result<T, String>;
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Simulate { scenario, seed, randomize, out } => simulate(&scenario, seed, randomize, out.as_deref()),
+        Command::Simulate {
+            scenario,
+            seed,
+            randomize,
+            duration,
+            out,
+        } => simulate(&scenario, seed, randomize, duration, out.as_deref()),
         Command::Scenarios => {
             for s in Scenario::all() {
                 println!("{:<26} {}", s.name(), s.expected().unwrap_or("none"));
             }
             Ok(())
         }
-        Command::Replay { trace, config, out, plot, json } => {
-            replay_cmd(&trace, config.as_deref(), out.as_deref(), plot.as_deref(), json)
+        Command::Replay {
+            trace,
+            config,
+            out,
+            plot,
+            json,
+            candump,
+            node,
+        } => {
+            let can = match candump {
+                Some(path) => Some((
+                    path,
+                    NodeId::new(node).ok_or(format!("--node {node} must be within 0..=15"))?,
+                )),
+                None => None,
+            };
+            replay_cmd(
+                &trace,
+                config.as_deref(),
+                out.as_deref(),
+                plot.as_deref(),
+                json,
+                can,
+            )
         }
-        Command::Evaluate { runs, seed, config, free_hours, json } => {
-            evaluate(runs, seed, config.as_deref(), free_hours, json.as_deref())
+        Command::Decode {
+            file,
+            config,
+            node,
+            quiet,
+            plot,
+        } => decode_cmd(&file, config.as_deref(), node, quiet, plot.as_deref()),
+        Command::Monitor {
+            iface,
+            config,
+            node,
+            quiet,
+            frames,
+            seconds,
+            candump,
+        } => monitor_cmd(
+            &iface,
+            config.as_deref(),
+            node,
+            quiet,
+            frames,
+            seconds,
+            candump.as_deref(),
+        ),
+        Command::Busload {
+            fingertips,
+            decimation,
+            context_hz,
+            tip_state_hz,
+            bitrate,
+        } => {
+            let mut cfg = BusConfig::with_fingertips(fingertips);
+            if let Some(d) = decimation {
+                cfg.stream_decimation = d;
+            }
+            if let Some(h) = context_hz {
+                cfg.context_hz = h;
+            }
+            if let Some(h) = tip_state_hz {
+                cfg.tip_state_hz = h;
+            }
+            if let Some(b) = bitrate {
+                cfg.bitrate = b;
+            }
+            let report = busload::analyse(&cfg).map_err(|e| e.to_string())?;
+            busload::write_report(&cfg, &report, &mut std::io::stdout().lock())
+                .map_err(|e| e.to_string())
         }
+        Command::Evaluate {
+            runs,
+            seed,
+            config,
+            free_hours,
+            json,
+        } => evaluate(runs, seed, config.as_deref(), free_hours, json.as_deref()),
         Command::Demo { out } => demo(&out),
     }
 }
@@ -127,7 +286,10 @@ fn load_detector(path: Option<&Path>) -> Result<(Detector, String)> {
             std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?,
             p.display().to_string(),
         ),
-        None => (host_tests::APPROACH_TOML.to_string(), "configs/approach.toml".to_string()),
+        None => (
+            host_tests::APPROACH_TOML.to_string(),
+            "configs/approach.toml".to_string(),
+        ),
     };
     let config = Config::from_toml(&text).map_err(|e| format!("{name}: {e}"))?;
     let detector = Detector::build(&config).map_err(|e| format!("{name}: {e}"))?;
@@ -138,10 +300,24 @@ fn find_scenario(name: &str) -> Result<Scenario> {
     name.parse::<Scenario>().map_err(|e| e.to_string())
 }
 
-fn simulate(name: &str, seed: u64, randomize: bool, out: Option<&Path>) -> Result<()> {
+fn simulate(
+    name: &str,
+    seed: u64,
+    randomize: bool,
+    duration_s: Option<f64>,
+    out: Option<&Path>,
+) -> Result<()> {
     let scenario = find_scenario(name)?;
-    let trace = sim::simulate(&scenario, &SimOptions { seed, randomize, ..SimOptions::default() })
-        .map_err(|e| e.to_string())?;
+    let trace = sim::simulate(
+        &scenario,
+        &SimOptions {
+            seed,
+            randomize,
+            duration_s,
+            ..SimOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())?;
     match out {
         Some(path) => trace.write(path).map_err(|e| e.to_string()),
         None => {
@@ -155,9 +331,9 @@ fn simulate(name: &str, seed: u64, randomize: bool, out: Option<&Path>) -> Resul
 struct Recorded {
     decisions: Vec<DecisionRecord>,
     /// Per event of the configuration: name and confidence per tick.
-    series: Vec<(String, Vec<f64>)>,
+    series: Series,
     /// Per feature of the configuration: name and value per tick.
-    features: Vec<(String, Vec<f64>)>,
+    features: Series,
 }
 
 fn record(detector: &Detector, trace: &Trace) -> Result<Recorded> {
@@ -191,8 +367,16 @@ fn truth_of(trace: &Trace) -> Option<(String, f64)> {
 /// a partial file behind.
 fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -> Result<()> {
     let mut text = String::new();
-    let _ = writeln!(text, "# fingertip replay of {} with {}", trace.name(), config);
-    let _ = writeln!(text, "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit");
+    let _ = writeln!(
+        text,
+        "# fingertip replay of {} with {}",
+        trace.name(),
+        config
+    );
+    let _ = writeln!(
+        text,
+        "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit"
+    );
     let header: Vec<String> = rec
         .series
         .iter()
@@ -233,15 +417,29 @@ fn describe(d: &DecisionRecord, truth: Option<&(String, f64)>) -> String {
         d.onset_s * 1e3
     );
     if let Some((event, onset)) = truth {
-        let _ = write!(s, "  ({:+.2} ms after the true {event} onset)", (d.t_s - onset) * 1e3);
+        let _ = write!(
+            s,
+            "  ({:+.2} ms after the true {event} onset)",
+            (d.t_s - onset) * 1e3
+        );
     }
     s
 }
 
-fn replay_cmd(path: &Path, config: Option<&Path>, out: Option<&Path>, plot_to: Option<&Path>, json: bool) -> Result<()> {
+fn replay_cmd(
+    path: &Path,
+    config: Option<&Path>,
+    out: Option<&Path>,
+    plot_to: Option<&Path>,
+    json: bool,
+    candump: Option<(PathBuf, NodeId)>,
+) -> Result<()> {
     let (detector, config_name) = load_detector(config)?;
     let trace = Trace::read(path).map_err(|e| e.to_string())?;
     let rec = record(&detector, &trace)?;
+    if let Some((file, node)) = candump {
+        write_candump(&file, &detector, &trace, node)?;
+    }
     let truth = truth_of(&trace);
     if let Some(out) = out {
         write_confidences(out, &trace, &rec, &config_name)?;
@@ -266,7 +464,13 @@ fn replay_cmd(path: &Path, config: Option<&Path>, out: Option<&Path>, plot_to: O
         println!("{report}");
         return Ok(());
     }
-    println!("{} with {}: {} ticks at {} Hz", trace.name(), config_name, trace.len(), detector.rate_hz());
+    println!(
+        "{} with {}: {} ticks at {} Hz",
+        trace.name(),
+        config_name,
+        trace.len(),
+        detector.rate_hz()
+    );
     if let Some((event, onset)) = &truth {
         println!("true event: {event} at {:.2} ms", onset * 1e3);
     }
@@ -279,21 +483,189 @@ fn replay_cmd(path: &Path, config: Option<&Path>, out: Option<&Path>, plot_to: O
     Ok(())
 }
 
+/// Failing runs listed per scenario by `evaluate`.
+const SHOWN_FAILURES: usize = 3;
+
 /// Length of each simulated stretch of event-free motion [s].
 const FREE_RUN_S: f64 = 60.0;
+
+/// Replays `trace` through the firmware's transmit logic and writes every frame it would
+/// send in candump log format, stamped with the trace's time.
+fn write_candump(path: &Path, detector: &Detector, trace: &Trace, node: NodeId) -> Result<()> {
+    let tx = Transmitter::with_defaults(node, detector.rate_hz().round() as u32)
+        .map_err(|e| e.to_string())?;
+    let mut state = TxState::new();
+    let status = Status {
+        tick_rate_hz: detector.rate_hz().round() as u16,
+        ..Status::default()
+    };
+    let mut text: Vec<u8> = Vec::new();
+    let t = trace.time();
+    let mut io_result = Ok(());
+    replay::replay(detector, trace, |row, _, out| {
+        let stamp = std::time::Duration::from_secs_f64(t.get(row).copied().unwrap_or(0.0).max(0.0));
+        for frame in tx.tick(&mut state, row as u32, out, &status) {
+            if io_result.is_ok() {
+                io_result = write_log_line(&mut text, stamp, "can0", &frame);
+            }
+        }
+    })
+    .map_err(|e| e.to_string())?;
+    io_result.map_err(|e| format!("{}: {e}", path.display()))?;
+    write_atomically(path, &text)
+}
+
+fn decode_options(config: Option<&Path>, node: Option<u8>, quiet: bool) -> Result<DecodeOptions> {
+    let (detector, _) = load_detector(config)?;
+    let node = match node {
+        Some(n) => Some(NodeId::new(n).ok_or(format!("--node {n} must be within 0..=15"))?),
+        None => None,
+    };
+    Ok(DecodeOptions {
+        tick_rate_hz: f64::from(detector.rate_hz()),
+        event_names: detector.events().iter().map(|n| n.to_string()).collect(),
+        node,
+        print_confidences: !quiet,
+    })
+}
+
+fn decode_cmd(
+    file: &Path,
+    config: Option<&Path>,
+    node: Option<u8>,
+    quiet: bool,
+    plot_to: Option<&Path>,
+) -> Result<()> {
+    let opts = decode_options(config, node, quiet)?;
+    let log = decode::decode_file(file, &opts, &mut std::io::stdout().lock())
+        .map_err(|e| e.to_string())?;
+    if let Some(p) = plot_to {
+        let (t, series, decisions) = stream_series(&log, &opts);
+        let run = RunPlot {
+            title: file.display().to_string(),
+            t: &t,
+            series,
+            truth: None,
+            decisions: &decisions,
+        };
+        plot::write_run(p, &run).map_err(|e| e.to_string())?;
+    }
+    Ok(())
+}
+
+/// Named series of values, one per tick or stream sample.
+type Series = Vec<(String, Vec<f64>)>;
+
+/// The confidence stream of a decoded log as per-event series on the stream's own time
+/// base (each event holds its last value between pages), and its event frames.
+fn stream_series(
+    log: &decode::DecodedLog,
+    opts: &DecodeOptions,
+) -> (Vec<f64>, Series, Vec<DecisionRecord>) {
+    use detector_core::can::Message;
+    let mut t = Vec::new();
+    let mut current: Vec<f64> = Vec::new();
+    let mut series: Series = Vec::new();
+    for r in log.records() {
+        let (Message::Confidence(m), Some(time)) = (&r.message, r.time) else {
+            continue;
+        };
+        for (k, c) in m.confidences.iter().enumerate() {
+            if m.evaluated & (1 << k) == 0 {
+                continue;
+            }
+            let index = 3 * usize::from(m.page) + k;
+            if current.len() <= index {
+                current.resize(index + 1, 0.0);
+            }
+            current[index] = c.to_f64();
+        }
+        t.push(time);
+        for (index, value) in current.iter().enumerate() {
+            if series.len() <= index {
+                let filled = vec![0.0; t.len() - 1];
+                series.push((opts.event_name(index), filled));
+            }
+            series[index].1.push(*value);
+        }
+    }
+    let t0 = t.first().copied().unwrap_or(0.0);
+    let t: Vec<f64> = t.iter().map(|x| x - t0).collect();
+    let decisions = log
+        .events()
+        .filter_map(|(r, m)| {
+            let time = r.time? - t0;
+            Some(DecisionRecord {
+                event: opts.event_name(usize::from(m.event.0)),
+                level: m.level.name(),
+                confidence: m.confidence.to_f64(),
+                onset_s: time - f64::from(m.onset_age) / opts.tick_rate_hz,
+                t_s: time,
+            })
+        })
+        .collect();
+    (t, series, decisions)
+}
+
+fn monitor_cmd(
+    iface: &str,
+    config: Option<&Path>,
+    node: Option<u8>,
+    quiet: bool,
+    frames: Option<usize>,
+    seconds: Option<f64>,
+    candump: Option<&Path>,
+) -> Result<()> {
+    use host_tests::can_tools::monitor::{self, MonitorLimits};
+    let opts = decode_options(config, node, quiet)?;
+    let duration = match seconds {
+        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => return Err(format!("--seconds {s} must be a positive number")),
+        None => None,
+    };
+    let limits = MonitorLimits {
+        max_frames: frames,
+        duration,
+    };
+    let mut log_file = match candump {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).map_err(|e| format!("{}: {e}", p.display()))?,
+        )),
+        None => None,
+    };
+    let copy = log_file.as_mut().map(|w| w as &mut dyn std::io::Write);
+    let log = monitor::monitor(
+        iface,
+        &opts,
+        &limits,
+        &mut std::io::stdout().lock(),
+        copy,
+        &|| false,
+    )
+    .map_err(|e| e.to_string())?;
+    decode::write_summary(&log, &mut std::io::stdout().lock()).map_err(|e| e.to_string())
+}
 
 /// Seed of run `k` of scenario `s`, spread so that no two runs share one.
 fn run_seed(base: u64, scenario: usize, k: usize) -> u64 {
     base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ ((scenario as u64) << 40) ^ k as u64
 }
 
-fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json: Option<&Path>) -> Result<()> {
+fn evaluate(
+    runs: usize,
+    seed: u64,
+    config: Option<&Path>,
+    free_hours: f64,
+    json: Option<&Path>,
+) -> Result<()> {
     let (detector, config_name) = load_detector(config)?;
     if runs == 0 {
         return Err("--runs must be at least 1".into());
     }
     if !(free_hours.is_finite() && free_hours >= 0.0) {
-        return Err(format!("--free-hours = {free_hours} must be a non-negative number"));
+        return Err(format!(
+            "--free-hours = {free_hours} must be a non-negative number"
+        ));
     }
     let scenarios = Scenario::table1();
     let free = Scenario::FreeMotion;
@@ -309,7 +681,7 @@ fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json
             .progress_chars("=> "),
     );
     let started = Instant::now();
-    let results: Vec<Result<(usize, Outcome, f64)>> = jobs
+    let results: Vec<Result<(usize, u64, Outcome, f64)>> = jobs
         .par_iter()
         .map(|&(s, k)| {
             let (scenario, duration_s) = if s == usize::MAX {
@@ -317,13 +689,26 @@ fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json
             } else {
                 (scenarios.get(s).ok_or("no such scenario")?, None)
             };
-            let opts = SimOptions { seed: run_seed(seed, s, k), randomize: true, duration_s, ..SimOptions::default() };
+            let opts = SimOptions {
+                seed: run_seed(seed, s, k),
+                randomize: true,
+                duration_s,
+                ..SimOptions::default()
+            };
             let trace = sim::simulate(scenario, &opts).map_err(|e| e.to_string())?;
-            let decisions = replay::replay(&detector, &trace, |_, _, _| {}).map_err(|e| e.to_string())?;
+            let decisions =
+                replay::replay(&detector, &trace, |_, _, _| {}).map_err(|e| e.to_string())?;
             let truth = truth_of(&trace);
-            let expected = scenario.expected().map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+            let expected = scenario
+                .expected()
+                .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
             bar.inc(1);
-            Ok((s, score::classify(expected, &decisions), trace.len() as f64 / trace.rate_hz()))
+            Ok((
+                s,
+                run_seed(seed, s, k),
+                score::classify(expected, &decisions),
+                trace.len() as f64 / trace.rate_hz(),
+            ))
         })
         .collect();
     bar.finish_and_clear();
@@ -333,9 +718,18 @@ fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json
     let mut free_alarms = 0usize;
     let mut free_seconds = 0.0;
     let mut simulated = 0.0;
+    let mut failures: Vec<(&str, u64, Outcome)> = Vec::new();
     for r in results {
-        let (s, outcome, seconds) = r?;
+        let (s, run, outcome, seconds) = r?;
         simulated += seconds;
+        if !outcome.is_right() {
+            let name = if s == usize::MAX {
+                free.name()
+            } else {
+                scenarios.get(s).map_or("?", |x| x.name())
+            };
+            failures.push((name, run, outcome.clone()));
+        }
         if s == usize::MAX {
             free_seconds += seconds;
             free_alarms += usize::from(!outcome.is_right());
@@ -349,23 +743,68 @@ fn evaluate(runs: usize, seed: u64, config: Option<&Path>, free_hours: f64, json
         .map(|(s, o)| ScenarioReport::tally(s.name(), s.expected(), o))
         .collect();
     let free_hours_run = free_seconds / 3600.0;
-    let alarms_per_hour = if free_hours_run > 0.0 { free_alarms as f64 / free_hours_run } else { 0.0 };
+    let alarms_per_hour = if free_hours_run > 0.0 {
+        free_alarms as f64 / free_hours_run
+    } else {
+        0.0
+    };
 
     println!("{config_name}: {runs} randomized runs per scenario, base seed {seed}");
     println!(
         "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
-        "scenario", "expected", "runs", "right", "wrong", "missed", "med ms", "p95 ms", "p99 ms", "max ms"
+        "scenario",
+        "expected",
+        "runs",
+        "right",
+        "wrong",
+        "missed",
+        "med ms",
+        "p95 ms",
+        "p99 ms",
+        "max ms"
     );
     for r in &reports {
         println!(
             "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
-            r.name, r.expected, r.runs, r.correct, r.wrong, r.missed, r.latency_ms.median, r.latency_ms.p95,
-            r.latency_ms.p99, r.latency_ms.max
+            r.name,
+            r.expected,
+            r.runs,
+            r.correct,
+            r.wrong,
+            r.missed,
+            r.latency_ms.median,
+            r.latency_ms.p95,
+            r.latency_ms.p99,
+            r.latency_ms.max
         );
     }
     println!(
         "false alarms: {free_alarms} runs with a confirmation in {free_hours_run:.2} h of event-free motion = {alarms_per_hour:.2} per hour"
     );
+    if !failures.is_empty() {
+        println!(
+            "runs that went wrong (at most {SHOWN_FAILURES} per scenario; `fingertip simulate NAME --randomize --seed SEED` reproduces one):"
+        );
+        let mut shown: std::collections::HashMap<&str, usize> = Default::default();
+        for (name, run, outcome) in &failures {
+            let n = shown.entry(name).or_default();
+            *n += 1;
+            if *n <= SHOWN_FAILURES {
+                let what = match outcome {
+                    Outcome::Wrong { event, t_s } => {
+                        format!("{event} confirmed at {:.2} ms", t_s * 1e3)
+                    }
+                    _ => "missed".to_string(),
+                };
+                let duration = if *name == free.name() {
+                    format!(" --duration {FREE_RUN_S}")
+                } else {
+                    String::new()
+                };
+                println!("  {name:<26} --seed {run}{duration}: {what}");
+            }
+        }
+    }
     println!(
         "throughput: {simulated:.0} simulated s in {wall:.1} wall s = {:.0} simulated s per wall s ({} threads)",
         simulated / wall.max(1e-9),
@@ -396,27 +835,45 @@ fn demo(out: &Path) -> Result<()> {
         ("contact_soft_2", "Contact, soft object, 2 cm/s"),
         ("disturbance_large_5", "Disturbance (vibration), 5 cm/s"),
         ("link_collision_8", "Link collision, 8 cm/s"),
-        ("sudden_accel_moving_5", "Sudden acceleration while moving, 5 cm/s"),
+        (
+            "sudden_accel_moving_5",
+            "Sudden acceleration while moving, 5 cm/s",
+        ),
     ];
     println!("fingertip demo: {config_name}, nominal Table 1 runs, event at t = 20 ms\n");
     let mut traces = Vec::new();
     let mut recs = Vec::new();
     for (name, _) in runs {
         let scenario = find_scenario(name)?;
-        let trace = sim::simulate(&scenario, &SimOptions { seed: 1, randomize: false, ..SimOptions::default() })
-            .map_err(|e| e.to_string())?;
+        let trace = sim::simulate(
+            &scenario,
+            &SimOptions {
+                seed: 1,
+                randomize: false,
+                ..SimOptions::default()
+            },
+        )
+        .map_err(|e| e.to_string())?;
         recs.push(record(&detector, &trace)?);
         traces.push((scenario, trace));
     }
     let mut plots = Vec::new();
     for (((scenario, trace), rec), (_, title)) in traces.iter().zip(&recs).zip(runs) {
         let truth = truth_of(trace);
-        let expected = scenario.expected().map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+        let expected = scenario
+            .expected()
+            .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
         let verdict = match score::classify(expected, &rec.decisions) {
-            Outcome::Correct { latency_s } => format!("{} confirmed {:.2} ms after onset", scenario.expected().unwrap_or(""), latency_s * 1e3),
+            Outcome::Correct { latency_s } => format!(
+                "{} confirmed {:.2} ms after onset",
+                scenario.expected().unwrap_or(""),
+                latency_s * 1e3
+            ),
             Outcome::QuietAsExpected => "nothing confirmed, as expected".to_string(),
             Outcome::Missed => "MISSED".to_string(),
-            Outcome::Wrong { event, t_s } => format!("WRONG: {event} confirmed at {:.2} ms", t_s * 1e3),
+            Outcome::Wrong { event, t_s } => {
+                format!("WRONG: {event} confirmed at {:.2} ms", t_s * 1e3)
+            }
         };
         println!("{title}: {verdict}");
         for d in &rec.decisions {
@@ -440,6 +897,9 @@ fn demo(out: &Path) -> Result<()> {
         let p = out.join(format!("figure4.{ext}"));
         plot::write_grid(&p, &figure, 2, (800, 380)).map_err(|e| e.to_string())?;
     }
-    println!("\nfigures: {}/figure4.png (.svg) and one per run", out.display());
+    println!(
+        "\nfigures: {}/figure4.png (.svg) and one per run",
+        out.display()
+    );
     Ok(())
 }

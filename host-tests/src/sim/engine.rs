@@ -40,10 +40,10 @@
 //! - Context (from the controller, held between its ticks): position error (commanded
 //!   minus the encoder-measured tip position), commanded velocity and acceleration.
 
+use super::CHANNELS;
 use super::filters::{AntiAliasFilter, HighPass1};
 use super::params::{Plant, Sensors};
 use super::trajectory::Trajectory;
-use super::CHANNELS;
 use rand::{Rng, RngExt};
 use std::f64::consts::{PI, TAU};
 
@@ -156,8 +156,8 @@ struct Adc {
     offset: f64,
     drift: f64,
     hum: f64,
-    hum_w: f64,
-    hum_phase: f64,
+    /// cos and sin of the hum's phase on this channel.
+    hum_phase: (f64, f64),
     sigma: f64,
 }
 
@@ -173,25 +173,24 @@ impl Adc {
             offset,
             drift,
             hum: s.hum_lsb * lsb,
-            hum_w: TAU * s.hum_frequency,
-            hum_phase: phase,
+            hum_phase: (phase.cos(), phase.sin()),
             sigma: noise_rms * s.noise_scale,
         }
     }
 
+    /// Converts `v` at time `t`; `mains` is (cos, sin) of the mains phase, `z` a standard
+    /// normal deviate.
     #[inline]
-    fn convert(&self, v: f64, t: f64, z: f64) -> f64 {
-        let y = self.gain * v
-            + self.offset
-            + self.drift * t
-            + self.hum * (self.hum_w * t + self.hum_phase).sin()
-            + self.sigma * z;
+    fn convert(&self, v: f64, t: f64, mains: (f64, f64), z: f64) -> f64 {
+        // sin(mains + phase)
+        let hum = mains.1 * self.hum_phase.0 + mains.0 * self.hum_phase.1;
+        let y = self.gain * v + self.offset + self.drift * t + self.hum * hum + self.sigma * z;
         // Adding zero turns a negative zero into a positive one.
         (y / self.lsb).round().clamp(-2048.0, 2047.0) * self.lsb + 0.0
     }
 }
 
-/// Standard normal deviates by the Box-Muller transform.
+/// Standard normal deviates by Marsaglia's polar method (two per accepted pair).
 struct Gauss {
     spare: Option<f64>,
 }
@@ -201,13 +200,17 @@ impl Gauss {
         if let Some(z) = self.spare.take() {
             return z;
         }
-        // 1 - U lies in (0, 1], so the logarithm is finite.
-        let u1 = 1.0 - rng.random::<f64>();
-        let u2 = rng.random::<f64>();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (TAU * u2).sin_cos();
-        self.spare = Some(r * s);
-        r * c
+        loop {
+            let u = 2.0 * rng.random::<f64>() - 1.0;
+            let v = 2.0 * rng.random::<f64>() - 1.0;
+            let q = u * u + v * v;
+            // Accepts about 79 % of pairs; q > 0 keeps the logarithm finite.
+            if q > 0.0 && q < 1.0 {
+                let k = (-2.0 * q.ln() / q).sqrt();
+                self.spare = Some(v * k);
+                return u * k;
+            }
+        }
     }
 }
 
@@ -255,7 +258,8 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let friction = |v: f64| -> f64 {
         p.arm_coulomb_friction * (v / FRICTION_SPEED).clamp(-1.0, 1.0) + p.arm_viscous_friction * v
     };
-    let tick_step = |k: u64| -> u64 { (k as f64 * ctrl_period * internal_rate - 1e-6).ceil() as u64 };
+    let tick_step =
+        |k: u64| -> u64 { (k as f64 * ctrl_period * internal_rate - 1e-6).ceil() as u64 };
 
     // Sensor chain.
     let mut aa: Vec<AntiAliasFilter> = (0..4)
@@ -263,12 +267,47 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         .collect();
     let mut hp = HighPass1::new(s.accel_highpass, internal_rate);
     let adc = [
-        Adc::new(0, s.force_x_gain, s.force_x_offset, s.force_x_drift, s, noise.random::<f64>() * TAU),
-        Adc::new(1, s.force_y_gain, s.force_y_offset, s.force_y_drift, s, noise.random::<f64>() * TAU),
-        Adc::new(2, s.accel_gain, s.accel_offset, s.accel_drift, s, noise.random::<f64>() * TAU),
-        Adc::new(3, s.stress_gain, s.stress_offset, s.stress_drift, s, noise.random::<f64>() * TAU),
+        Adc::new(
+            0,
+            s.force_x_gain,
+            s.force_x_offset,
+            s.force_x_drift,
+            s,
+            noise.random::<f64>() * TAU,
+        ),
+        Adc::new(
+            1,
+            s.force_y_gain,
+            s.force_y_offset,
+            s.force_y_drift,
+            s,
+            noise.random::<f64>() * TAU,
+        ),
+        Adc::new(
+            2,
+            s.accel_gain,
+            s.accel_offset,
+            s.accel_drift,
+            s,
+            noise.random::<f64>() * TAU,
+        ),
+        Adc::new(
+            3,
+            s.stress_gain,
+            s.stress_offset,
+            s.stress_drift,
+            s,
+            noise.random::<f64>() * TAU,
+        ),
     ];
     let mut gauss = Gauss { spare: None };
+    // Mains phase, advanced once per output sample.
+    let (mut mains_c, mut mains_s) = (1.0f64, 0.0f64);
+    let (mains_dc, mains_ds) = {
+        let (sn, cs) = (TAU * s.hum_frequency / setup.rate_hz).sin_cos();
+        (cs, sn)
+    };
+    let mut until_sample = 0usize;
 
     // Initial state: steady motion at the commanded initial velocity, all springs relaxed,
     // the whole finger lagging the command by the position error that balances friction.
@@ -425,10 +464,8 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         }) = &setup.object
         {
             let normal = m_o * GRAVITY;
-            if stuck {
-                if f_n > mu_s * normal {
-                    stuck = false;
-                }
+            if stuck && f_n > mu_s * normal {
+                stuck = false;
             }
             if !stuck {
                 ao = (f_n - mu_k * normal) / m_o;
@@ -439,24 +476,37 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let force_x = -mc * ad_x - ff;
         let force_y = -mc * ad_y - ffy;
         let accel = hp.process(as_x + s.accel_cross_axis * as_y);
-        let stress = (f_n - prev_fn) * internal_rate + s.stress_crosstalk * (ff - prev_ff) * internal_rate;
+        let stress =
+            (f_n - prev_fn) * internal_rate + s.stress_crosstalk * (ff - prev_ff) * internal_rate;
         prev_fn = f_n;
         prev_ff = ff;
         let y0 = aa[0].process(force_x);
         let y1 = aa[1].process(force_y);
         let y2 = aa[2].process(accel);
         let y3 = aa[3].process(stress);
-        if i % n_over as u64 == 0 {
+        if until_sample == 0 {
+            until_sample = n_over;
             let row = i / n_over as u64;
             let ts = row as f64 / setup.rate_hz;
             for (k, y) in [y0, y1, y2, y3].into_iter().enumerate() {
                 let z = gauss.next(noise);
-                out[k].push(adc[k].convert(y, ts, z));
+                out[k].push(adc[k].convert(y, ts, (mains_c, mains_s), z));
+            }
+            (mains_c, mains_s) = (
+                mains_c * mains_dc - mains_s * mains_ds,
+                mains_s * mains_dc + mains_c * mains_ds,
+            );
+            if row.is_multiple_of(1024) {
+                let norm = mains_c.hypot(mains_s);
+                mains_c /= norm;
+                mains_s /= norm;
             }
             for (k, v) in ctx.iter().enumerate() {
                 out[4 + k].push(round_context(*v));
             }
         }
+
+        until_sample -= 1;
 
         // Integrate (semi-implicit Euler: velocities first, positions with the new ones).
         ax.va += aa_x * dt;

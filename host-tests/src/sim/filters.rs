@@ -196,7 +196,10 @@ mod tests {
         assert!(last.abs() <= 1.01);
         let mut peak: f64 = 0.0;
         for i in 0..1000 {
-            peak = peak.max(h.process(1.0 + (2.0 * PI * 500.0 * i as f64 / fs).sin()).abs());
+            peak = peak.max(
+                h.process(1.0 + (2.0 * PI * 500.0 * i as f64 / fs).sin())
+                    .abs(),
+            );
         }
         assert!(peak > 0.98 && peak < 1.02, "{peak}");
     }

@@ -337,7 +337,9 @@ impl fmt::Display for Scenario {
 
 /// The name is not one of [`Scenario::all`]'s.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error("unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, free_motion)")]
+#[error(
+    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, free_motion)"
+)]
 pub struct UnknownScenario(pub String);
 
 impl FromStr for Scenario {
@@ -359,7 +361,7 @@ pub struct SimOptions {
     pub randomize: bool,
     /// The detector rate: the trace's sampling rate (200 Hz to 20 kHz).
     pub rate_hz: f64,
-    /// The robot controller's tick rate (100 Hz to 10 kHz): context updates and position
+    /// The robot controller's tick rate (500 Hz to 10 kHz): context updates and position
     /// control.
     pub controller_rate_hz: f64,
     /// Length of the run in seconds (at most 3600). `None`: onset + 130 ms for Table 1
@@ -398,7 +400,13 @@ pub enum SimError {
     Trace(#[from] TraceError),
 }
 
-fn check(name: &'static str, value: f64, lo: f64, hi: f64, reason: &'static str) -> Result<(), SimError> {
+fn check(
+    name: &'static str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    reason: &'static str,
+) -> Result<(), SimError> {
     if value.is_finite() && value >= lo && value <= hi {
         Ok(())
     } else {
@@ -444,9 +452,9 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     check(
         "controller_rate_hz",
         opts.controller_rate_hz,
-        100.0,
+        500.0,
         10_000.0,
-        "100 Hz to 10 kHz",
+        "500 Hz to 10 kHz (the position loop is unstable much below)",
     )?;
     if let Some(d) = opts.duration_s {
         check(
@@ -561,7 +569,11 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
                     // vibration, towards +x or -x, each equally likely.
                     let impulse = r && prng.random::<f64>() < 0.5;
                     let towards_plus_x = r && prng.random::<f64>() < 0.5;
-                    let base = if towards_plus_x { 0.0 } else { std::f64::consts::PI };
+                    let base = if towards_plus_x {
+                        0.0
+                    } else {
+                        std::f64::consts::PI
+                    };
                     let kind = if impulse {
                         DisturbanceKind::Impulse { peak, duration }
                     } else {

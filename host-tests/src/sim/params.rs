@@ -259,7 +259,7 @@ param_group! {
         /// Duration of the vibration burst.
         vibration_duration: "s" = 0.040, [0.010, 0.060];
         /// Angle of the force from the nearer of +x and -x, towards y.
-        direction_offset: "rad" = 0.0, [-0.7854, 0.7854];
+        direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
 }
 
@@ -278,7 +278,7 @@ param_group! {
         /// Duration of the vibration burst.
         vibration_duration: "s" = 0.040, [0.010, 0.060];
         /// Angle of the force from the nearer of +x and -x, towards y.
-        direction_offset: "rad" = 0.0, [-0.7854, 0.7854];
+        direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
 }
 
@@ -361,7 +361,7 @@ fn fmt_num(v: f64) -> String {
         return "0".into();
     }
     let a = v.abs();
-    if (1e-3..1e6).contains(&a) {
+    if (1e-4..1e7).contains(&a) {
         let s = format!("{v:.6}");
         let s = s.trim_end_matches('0').trim_end_matches('.');
         s.to_string()

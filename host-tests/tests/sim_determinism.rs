@@ -1,0 +1,118 @@
+//! Every run is seeded: the same scenario, options and seed give an identical trace.
+
+use host_tests::sim::{self, Scenario, SimOptions};
+
+fn opts(seed: u64, randomize: bool) -> SimOptions {
+    SimOptions {
+        seed,
+        randomize,
+        ..SimOptions::default()
+    }
+}
+
+#[test]
+fn same_seed_same_trace() {
+    for s in Scenario::table1() {
+        for randomize in [false, true] {
+            let a = sim::simulate(s, &opts(42, randomize)).unwrap();
+            let b = sim::simulate(s, &opts(42, randomize)).unwrap();
+            assert_eq!(a, b, "{s}");
+            assert_eq!(a.to_csv(), b.to_csv(), "{s}");
+        }
+    }
+    let free = SimOptions {
+        duration_s: Some(2.0),
+        ..opts(9, true)
+    };
+    let a = sim::simulate(&Scenario::FreeMotion, &free).unwrap();
+    let b = sim::simulate(&Scenario::FreeMotion, &free).unwrap();
+    assert_eq!(a, b);
+}
+
+#[test]
+fn other_seed_other_trace() {
+    for s in Scenario::all() {
+        let a = sim::simulate(s, &opts(1, true)).unwrap();
+        let b = sim::simulate(s, &opts(2, true)).unwrap();
+        assert_ne!(a.column("force_x"), b.column("force_x"), "{s}");
+    }
+    // Nominal runs share their physics; only the noise differs.
+    let a = sim::simulate(&Scenario::ContactHard8, &opts(1, false)).unwrap();
+    let b = sim::simulate(&Scenario::ContactHard8, &opts(2, false)).unwrap();
+    assert_ne!(a.column("skin_accel"), b.column("skin_accel"));
+    assert_eq!(a.meta(sim::META_ONSET), b.meta(sim::META_ONSET));
+    assert_eq!(a.column("vel_des_x"), b.column("vel_des_x"));
+}
+
+#[test]
+fn randomized_runs_draw_parameters_nominal_runs_do_not() {
+    let param = |seed, randomize, key: &str| {
+        sim::simulate(&Scenario::ContactSoft5, &opts(seed, randomize))
+            .unwrap()
+            .meta(key)
+            .unwrap()
+            .to_string()
+    };
+    let key = "param.soft_object.stiffness";
+    assert_eq!(param(1, false, key), "2000");
+    assert_eq!(param(2, false, key), "2000");
+    assert_ne!(param(1, true, key), param(2, true, key));
+    assert_ne!(param(1, true, "param.plant.skin_mass"), "0.002");
+}
+
+#[test]
+fn equal_seeds_of_different_scenarios_are_independent() {
+    let a = sim::simulate(&Scenario::ContactHard5, &opts(5, true)).unwrap();
+    let b = sim::simulate(&Scenario::ContactSoft5, &opts(5, true)).unwrap();
+    assert_ne!(
+        a.meta("param.plant.foam_stiffness"),
+        b.meta("param.plant.foam_stiffness")
+    );
+}
+
+#[test]
+fn scenario_names_and_expected_events() {
+    assert_eq!(Scenario::all().len(), 14);
+    assert_eq!(Scenario::table1().len(), 13);
+    let expected = [
+        ("contact_hard_8", Some("contact")),
+        ("contact_hard_5", Some("contact")),
+        ("contact_hard_2", Some("contact")),
+        ("contact_soft_8", Some("contact")),
+        ("contact_soft_5", Some("contact")),
+        ("contact_soft_2", Some("contact")),
+        ("object_moves_5", Some("contact")),
+        ("link_collision_8", Some("link_collision")),
+        ("link_collision_2", Some("link_collision")),
+        ("disturbance_large_5", Some("disturbance")),
+        ("disturbance_small_5", Some("disturbance")),
+        ("sudden_accel_standstill", None),
+        ("sudden_accel_moving_5", None),
+        ("free_motion", None),
+    ];
+    for (s, (name, event)) in Scenario::all().iter().zip(expected) {
+        assert_eq!(s.name(), name);
+        assert_eq!(s.expected(), event, "{name}");
+        assert_eq!(Scenario::from_name(name), Some(*s));
+        assert_eq!(name.parse::<Scenario>().unwrap(), *s);
+        assert_eq!(s.to_string(), name);
+        let tr = sim::simulate(
+            s,
+            &SimOptions {
+                duration_s: Some(0.2),
+                ..opts(0, false)
+            },
+        )
+        .unwrap();
+        assert_eq!(tr.meta(sim::META_SCENARIO), Some(name));
+        assert_eq!(tr.meta(sim::META_EXPECTED), Some(event.unwrap_or("none")));
+    }
+    let e = "contact_hard_9"
+        .parse::<Scenario>()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("contact_hard_9") && e.contains("free_motion"),
+        "{e}"
+    );
+}
