@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole test suite, runnable on a fresh Debian machine with only rustup/cargo and
 # Python 3: installs what it needs (idempotently), then checks formatting, lints, host
-# tests, the emulated Cortex-M4 run and the firmware's size budget.
+# tests (which include the core on an emulated Cortex-M4 and the CAN codec against
+# cantools).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -28,9 +29,13 @@ fi
 step "formatting"
 cargo fmt --all --check
 
-step "lints (host crates)"
+step "lints: host crates, and the Cortex-M4 test program as built for the target"
 cargo clippy --all-targets -- -D warnings
+cargo clippy -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
 
-step "tests (host)"
+step "docs build without warnings"
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p host-tests --quiet
+
+step "tests (host; the emulated Cortex-M4; cantools)"
 export FINGERTIP_REQUIRE_PYTHON=1 FINGERTIP_REQUIRE_QEMU=1
 cargo test

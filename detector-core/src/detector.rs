@@ -604,11 +604,23 @@ impl Detector {
     /// One whole tick: features, term confidences, event confidences, decisions.
     pub fn tick(&self, state: &mut State, now: Tick, inputs: &Inputs) -> Output {
         let mut out = Output::default();
-        self.update_features(state, inputs);
-        self.term_confidences(state, inputs.faults, &mut out);
-        self.combine(state, &mut out);
-        self.decide(state, now, &mut out);
+        self.tick_into(state, now, inputs, &mut out);
         out
+    }
+
+    /// [`Detector::tick`] writing into a caller's `out`, which is cleared first: no
+    /// [`Output`] is built and copied per tick (the firmware's way).
+    pub fn tick_into(&self, state: &mut State, now: Tick, inputs: &Inputs, out: &mut Output) {
+        out.confidences = [Confidence::ZERO; MAX_EVENTS];
+        out.unjudgeable = 0;
+        out.degraded = 0;
+        out.alerting = 0;
+        out.confirmed = 0;
+        out.decisions.clear();
+        self.update_features(state, inputs);
+        self.term_confidences(state, inputs.faults, out);
+        self.combine(state, out);
+        self.decide(state, now, out);
     }
 
     /// Stage 1: stores the samples and updates every feature, in order. Features run in
@@ -639,16 +651,19 @@ impl Detector {
             let (ctx, sen) = psi.split_at_mut(MAX_TERMS);
             let mut sensor_ok = false;
             for (t, p) in e.context.iter().zip(ctx.iter_mut()) {
-                *p = eval(t, &state.values, faults);
                 if t.channels & faults != 0 {
+                    *p = 0;
                     out.unjudgeable |= bit;
+                } else {
+                    *p = eval(t, &state.values);
                 }
             }
             for (t, p) in e.sensor.iter().zip(sen.iter_mut()) {
-                *p = eval(t, &state.values, faults);
                 if t.channels & faults != 0 {
+                    *p = 0;
                     out.degraded |= bit;
                 } else {
+                    *p = eval(t, &state.values);
                     sensor_ok = true;
                 }
             }
@@ -745,11 +760,13 @@ impl Detector {
     }
 }
 
-#[inline]
-fn eval(t: &Term, values: &[i32; MAX_SLOTS], faults: ChannelMask) -> u16 {
-    if t.channels & faults != 0 {
-        return 0;
-    }
-    let x = values.get(usize::from(t.slot)).copied().unwrap_or(0);
+/// A term's confidence from the current slot values (Q15).
+#[inline(always)]
+fn eval(t: &Term, values: &[i32; MAX_SLOTS]) -> u16 {
+    // Slots are validated below MAX_SLOTS, a power of two: the mask costs one instruction
+    // and leaves no out-of-bounds path.
+    let x = values[usize::from(t.slot) & (MAX_SLOTS - 1)];
     t.cdf.eval(Signal::from_bits(x)).to_bits()
 }
+
+const _: () = assert!(MAX_SLOTS.is_power_of_two());

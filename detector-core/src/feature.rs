@@ -4,7 +4,7 @@
 //! A feature reads *slots*: the input channels come first, then the features in their
 //! declaration order, so a feature can build on any channel or any earlier feature
 //! (a low-pass of a derivative, the STE of a difference, ...). All arithmetic is integer,
-//! saturating at the [`Signal`] range, with no division.
+//! saturating at the [`Signal`](crate::Signal) range, with no division.
 
 use crate::MAX_STE_WINDOW;
 
@@ -79,7 +79,7 @@ pub enum StageSpec<N> {
     /// window h normalized to sum 1, so ζ is a mean square in the input's unit squared
     /// whatever N. Until N samples have arrived the missing ones count as zero. Inputs
     /// saturate at ±2048 before squaring (so a window's sums fit 64 bits); the result
-    /// saturates at the [`Signal`] range.
+    /// saturates at the [`Signal`](crate::Signal) range.
     Ste {
         /// Source channel or feature.
         input: N,
@@ -316,7 +316,10 @@ impl Stage {
         ring: &mut [u64; STE_POOL],
         weights: &[u32; STE_POOL],
     ) -> i32 {
-        let get = |slot: u8| values.get(usize::from(slot)).copied().unwrap_or(0);
+        // Slots are validated below the slot count, a power of two: masking keeps every
+        // access in bounds for one instruction.
+        let mask = values.len().next_power_of_two() - 1;
+        let get = |slot: u8| values.get(usize::from(slot) & mask).copied().unwrap_or(0);
         match *self {
             Stage::Raw(i) => get(i),
             Stage::Abs(i) => get(i).saturating_abs(),
@@ -447,7 +450,8 @@ fn isqrt32(n: u32) -> u32 {
     let mut x = 1u32 << bits.div_ceil(2);
     // Converges in at most 6 steps from this start; the bound only guards the loop.
     for _ in 0..8 {
-        let y = (x + n / x) / 2;
+        // x ≥ 1 throughout; checked_div keeps a panic path out of the tick.
+        let y = (x + n.checked_div(x).unwrap_or(n)) / 2;
         if y >= x {
             break;
         }

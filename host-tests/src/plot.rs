@@ -14,11 +14,11 @@ use crate::replay::DecisionRecord;
 pub struct RunPlot<'a> {
     /// Title above the chart.
     pub title: String,
-    /// Time of each tick [s].
+    /// Time of each tick (s).
     pub t: &'a [f64],
     /// Each event's name and confidence per tick.
     pub series: Vec<(String, Vec<f64>)>,
-    /// The true event and its onset [s], if known.
+    /// The true event and its onset (s), if known.
     pub truth: Option<(String, f64)>,
     /// Levels raised.
     pub decisions: &'a [DecisionRecord],

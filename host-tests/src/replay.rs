@@ -13,9 +13,9 @@ pub struct DecisionRecord {
     pub level: &'static str,
     /// The event's confidence when the level was raised, in [0, 1].
     pub confidence: f64,
-    /// Back-dated onset [s].
+    /// Back-dated onset (s).
     pub onset_s: f64,
-    /// When the level was raised [s].
+    /// When the level was raised (s).
     pub t_s: f64,
 }
 

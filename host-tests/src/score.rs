@@ -8,7 +8,7 @@ use crate::replay::DecisionRecord;
 pub enum Outcome {
     /// The expected event was the first confirmed, at or after its onset.
     Correct {
-        /// From the true onset to the confirmation [s].
+        /// From the true onset to the confirmation (s).
         latency_s: f64,
     },
     /// Something else was confirmed first: another event, or any event before the true
@@ -16,7 +16,7 @@ pub enum Outcome {
     Wrong {
         /// The event wrongly confirmed.
         event: String,
-        /// When [s].
+        /// When (s).
         t_s: f64,
     },
     /// An event was expected and nothing was confirmed.
@@ -32,7 +32,7 @@ impl Outcome {
     }
 }
 
-/// Scores one run: `expected` is the true event and its onset [s], or `None` for a run in
+/// Scores one run: `expected` is the true event and its onset (s), or `None` for a run in
 /// which nothing should be confirmed.
 pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> Outcome {
     let first = decisions.iter().find(|d| d.is_confirm());
@@ -58,7 +58,7 @@ pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> 
     }
 }
 
-/// Latency statistics [ms].
+/// Latency statistics (ms).
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Latency {
     /// Median.
@@ -107,7 +107,7 @@ pub struct ScenarioReport {
     pub wrong: usize,
     /// Runs that confirmed nothing although an event happened.
     pub missed: usize,
-    /// Latency from true onset to confirmation over the correct runs [ms].
+    /// Latency from true onset to confirmation over the correct runs (ms).
     pub latency_ms: Latency,
 }
 

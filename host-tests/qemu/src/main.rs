@@ -29,9 +29,10 @@ mod target {
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
     use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
+    use fingertip_qemu::digest::Crc32;
     use fingertip_qemu::replay::{Position, SegmentLine, replay};
     use fingertip_qemu::trace::Trace;
-    use fingertip_qemu::{CONFIG_SOURCE, TRACE, TRACE_SOURCE};
+    use fingertip_qemu::{CONFIG_POSTCARD, CONFIG_SOURCE, TRACE, TRACE_SOURCE};
 
     /// One whole tick, as the firmware calls it. The root of the forbidden-helper check.
     #[unsafe(no_mangle)]
@@ -41,8 +42,9 @@ mod target {
         state: &mut State,
         now: Tick,
         inputs: &Inputs,
-    ) -> Output {
-        detector.tick(state, now, inputs)
+        out: &mut Output,
+    ) {
+        detector.tick_into(state, now, inputs, out);
     }
 
     /// Stage 1 alone: samples in, features updated.
@@ -239,9 +241,12 @@ mod target {
             Ok(t) => t,
             Err(e) => fail(&e),
         };
+        let mut config_crc = Crc32::new();
+        config_crc.update(CONFIG_POSTCARD);
         hprintln!(
-            "fingertip-qemu config={} trace={} segments={} ticks={} channels={} features={} events={} state_bytes={}",
+            "fingertip-qemu config={} config_crc={:08x} trace={} segments={} ticks={} channels={} features={} events={} state_bytes={}",
             CONFIG_SOURCE,
+            config_crc.value(),
             TRACE_SOURCE,
             trace.segment_count(),
             trace.ticks(),
@@ -265,13 +270,14 @@ mod target {
         );
 
         let mut tick = Stats::new();
+        let mut out = Output::default();
         let digest = replay(
             &detector,
             &trace,
             |state, now, inputs, at| {
-                let (out, c) = timed(|| fingertip_tick(&detector, state, now, inputs));
+                let ((), c) = timed(|| fingertip_tick(&detector, state, now, inputs, &mut out));
                 tick.add(meter.insns(c), at);
-                out
+                out.clone()
             },
             |r| {
                 hprintln!(

@@ -486,7 +486,7 @@ fn replay_cmd(
 /// Failing runs listed per scenario by `evaluate`.
 const SHOWN_FAILURES: usize = 3;
 
-/// Length of each simulated stretch of event-free motion [s].
+/// Length of each simulated stretch of event-free motion (s).
 const FREE_RUN_S: f64 = 60.0;
 
 /// Replays `trace` through the firmware's transmit logic and writes every frame it would
