@@ -6,7 +6,8 @@
 //!   checked against the channels the board can feed and the sample timer's clock, and
 //!   written as postcard bytes (`config.postcard`) that the chip decodes at boot;
 //! - `build_consts.rs`: the configuration's CRC-32 (reported in the status heartbeat),
-//!   its source path, and the CAN node id from `FINGERTIP_NODE_ID` (0..=15, default 0);
+//!   its source path, the sample timer's period for its rate, and the CAN node id from
+//!   `FINGERTIP_NODE_ID` (0..=15, default 0);
 //! - for the chip only: `memory.x` on the linker path and the link arguments of the
 //!   board binary (`-Tlink.x`, `-Tdefmt.x`, `--nmagic`), for the binary alone so that no
 //!   other crate built for the target is made to link defmt.
@@ -26,6 +27,10 @@ mod wiring;
 #[path = "src/checksum.rs"]
 mod checksum;
 
+#[allow(dead_code)]
+#[path = "src/trigger.rs"]
+mod trigger;
+
 type Result<T> = std::result::Result<T, Box<dyn Error>>;
 
 const DEFAULT_CONFIG: &str = "configs/approach.toml";
@@ -39,6 +44,7 @@ fn main() -> Result<()> {
     println!("cargo:rerun-if-env-changed=FINGERTIP_NODE_ID");
     println!("cargo:rerun-if-changed=src/wiring.rs");
     println!("cargo:rerun-if-changed=src/checksum.rs");
+    println!("cargo:rerun-if-changed=src/trigger.rs");
 
     let config_rel = env::var("FINGERTIP_CONFIG").unwrap_or_else(|_| DEFAULT_CONFIG.into());
     let config_path = root.join(&config_rel);
@@ -47,7 +53,19 @@ fn main() -> Result<()> {
         .map_err(|e| format!("reading {}: {e}", config_path.display()))?;
     let config = Config::from_toml(&text).map_err(|e| format!("{config_rel}: {e}"))?;
     check_channels(&config).map_err(|e| format!("{config_rel}: {e}"))?;
-    check_rate(config.rate_hz).map_err(|e| format!("{config_rel}: {e}"))?;
+    let period = trigger::TriggerPeriod::new(
+        wiring::SAMPLE_TIMER_CLOCK_HZ,
+        config.rate_hz,
+        wiring::MAX_RATE_ERROR_PPM,
+    )
+    .map_err(|e| {
+        format!(
+            "{config_rel}: rate_hz = {}: the {} Hz sample timer cannot make it within {} ppm ({e:?})",
+            config.rate_hz,
+            wiring::SAMPLE_TIMER_CLOCK_HZ,
+            wiring::MAX_RATE_ERROR_PPM
+        )
+    })?;
 
     let bytes = postcard::to_stdvec(&config)?;
     let back: Config = postcard::from_bytes(&bytes)?;
@@ -86,6 +104,17 @@ fn main() -> Result<()> {
         "/// The CAN node id the firmware was built for (`FINGERTIP_NODE_ID`, 0..=15)."
     )?;
     writeln!(consts, "pub const NODE_ID: u8 = {node};")?;
+    writeln!(
+        consts,
+        "/// Sample-timer clocks per detector tick, for the configuration's rate."
+    )?;
+    writeln!(consts, "pub const TRIGGER_CLOCKS: u32 = {};", period.clocks)?;
+    writeln!(consts, "/// The rate those clocks make, mHz.")?;
+    writeln!(
+        consts,
+        "pub const TRIGGER_RATE_MHZ: u64 = {};",
+        period.actual_mhz
+    )?;
     fs::write(out.join("build_consts.rs"), consts)?;
 
     if env::var("CARGO_CFG_TARGET_OS")? == "none" {
@@ -115,25 +144,6 @@ fn check_channels(config: &Config) -> Result<()> {
             )
             .into());
         }
-    }
-    Ok(())
-}
-
-/// The ADC trigger period is a whole number of timer clocks: the rate it gives must be
-/// the configured one, or the detector's tick would not keep time.
-fn check_rate(rate_hz: f32) -> Result<()> {
-    let rate = f64::from(rate_hz);
-    let clocks = (f64::from(wiring::SAMPLE_TIMER_CLOCK_HZ) / rate).round();
-    let actual = f64::from(wiring::SAMPLE_TIMER_CLOCK_HZ) / clocks;
-    let ppm = ((actual - rate) / rate * 1e6).abs();
-    if ppm > f64::from(wiring::MAX_RATE_ERROR_PPM) {
-        return Err(format!(
-            "rate_hz = {rate_hz}: the {} Hz sample timer can only make {actual:.3} Hz \
-             ({ppm:.0} ppm off, at most {} allowed)",
-            wiring::SAMPLE_TIMER_CLOCK_HZ,
-            wiring::MAX_RATE_ERROR_PPM
-        )
-        .into());
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 # The whole test suite, runnable on a fresh Debian machine with only rustup/cargo and
 # Python 3: installs what it needs (idempotently), then checks formatting, lints, host
 # tests (which include the core on an emulated Cortex-M4 and the CAN codec against
-# cantools).
+# cantools) and the firmware's build and size budget.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -20,6 +20,9 @@ if ! command -v qemu-system-arm >/dev/null || ! command -v arm-none-eabi-objdump
         qemu-system-arm binutils-arm-none-eabi
 fi
 
+step "flip-link (the firmware's linker: a stack overflow faults instead of corrupting RAM)"
+command -v flip-link >/dev/null || cargo install flip-link --locked
+
 step "python venv with cantools (.venv)"
 if ! .venv/bin/python -c 'import cantools' 2>/dev/null; then
     python3 -m venv .venv
@@ -34,8 +37,11 @@ cargo clippy --all-targets -- -D warnings
 cargo clippy -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
 
 step "docs build without warnings"
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p host-tests --quiet
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p host-tests -p firmware --quiet
 
 step "tests (host; the emulated Cortex-M4; cantools)"
 export FINGERTIP_REQUIRE_PYTHON=1 FINGERTIP_REQUIRE_QEMU=1
 cargo test
+
+step "firmware for the STM32G431CB: release build without warnings, clippy, size budget"
+bash firmware/check-size.sh

@@ -13,8 +13,14 @@ use detector_core::can::{
 };
 use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
 
+use core::sync::atomic::Ordering;
+
+use detector_core::can::CanFrame;
+
 use crate::sampling::AdcSample;
 use crate::shared::Shared;
+use crate::supervise::Task;
+use crate::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
 /// Where the board's inputs go in the configuration's channel order: `None` for an
@@ -311,6 +317,86 @@ impl<'d> Engine<'d> {
     }
 }
 
+/// The detector task's bookkeeping around [`Engine::tick`]: publishing the tick, timing
+/// it, counting overruns and refused frames, and clearing the latched flags a heartbeat
+/// reported. The board supplies the cycle counter and the frame queue.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct TickRunner {
+    timing: TickTiming,
+    core_hz: u32,
+    worst_tenths: u16,
+    queue_full: u32,
+}
+
+impl TickRunner {
+    /// Bookkeeping for a detector at `rate_hz` on a core clocked at `core_hz`.
+    pub const fn new(core_hz: u32, rate_hz: u32) -> TickRunner {
+        TickRunner {
+            timing: TickTiming::new(budget_cycles(core_hz, rate_hz)),
+            core_hz,
+            worst_tenths: 0,
+            queue_full: 0,
+        }
+    }
+
+    /// One tick. `cycles` reads the free-running cycle counter (it may wrap); `send`
+    /// queues a frame for the CAN controller and returns `false` when the queue is full.
+    pub fn step(
+        &mut self,
+        engine: &mut Engine<'_>,
+        sample: &AdcSample,
+        shared: &Shared,
+        cycles: impl Fn() -> u32,
+        mut send: impl FnMut(CanFrame) -> bool,
+    ) -> TickResult {
+        // The receive task stamps frames with this tick: never newer than the tick being
+        // judged (the core would read a negative age as stale).
+        shared.now.store(sample.tick, Ordering::Relaxed);
+        let start = cycles();
+        let counters = &shared.counters;
+        let health = Health {
+            overruns: self.timing.overruns(),
+            worst_tick: self.worst_tenths,
+            bus_errors: counters.bus_errors(),
+            tx_dropped: self.queue_full.saturating_add(counters.tx_lost.get()),
+            latched: shared.latched.peek(),
+            sensor_fault: shared.sensor_fault.load(Ordering::Relaxed),
+        };
+        let result = engine.tick(sample, shared, &health);
+        for frame in result.frames.iter() {
+            if !send(*frame) {
+                self.queue_full = self.queue_full.saturating_add(1);
+                shared.latched.raise(FaultFlags::TX_DROPPED);
+            }
+        }
+        if result.heartbeat {
+            shared
+                .latched
+                .clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
+        }
+        let previous_worst = self.timing.worst();
+        if self.timing.record(cycles().wrapping_sub(start)) {
+            shared.latched.raise(FaultFlags::OVERRUN);
+        }
+        if self.timing.worst() != previous_worst {
+            self.worst_tenths = cycles_to_tenths_us(self.timing.worst(), self.core_hz);
+        }
+        shared.liveness.check_in(Task::Detector);
+        result
+    }
+
+    /// The tick timing so far.
+    pub const fn timing(&self) -> &TickTiming {
+        &self.timing
+    }
+
+    /// Frames the queue refused since boot.
+    pub const fn queue_full(&self) -> u32 {
+        self.queue_full
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -554,6 +640,25 @@ mod tests {
     }
 
     #[test]
+    fn frames_must_be_stamped_with_the_detectors_tick_not_the_samplers() {
+        // Why the receive task stamps frames with `Shared::now`, the detector's tick: a
+        // frame stamped with a tick the detector has not judged yet (the sampler runs a
+        // block ahead) has a negative age, which reads as stale.
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        fresh(&shared, &e, 14, 0);
+        let r = e.tick(&sample(10, 0.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, PRESS | BUMP);
+        // And the core latches staleness until the next good frame.
+        let r = e.tick(&sample(14, 0.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, PRESS | BUMP);
+        fresh(&shared, &e, 14, 1);
+        let r = e.tick(&sample(15, 0.0, 0.0), &shared, &Health::default());
+        assert_eq!(r.output.unjudgeable, 0);
+    }
+
+    #[test]
     fn a_stale_tip_state_only_degrades_the_events_that_read_it() {
         let d = detector();
         let mut e = Engine::new(&d, params()).unwrap();
@@ -664,10 +769,102 @@ mod tests {
     }
 
     #[test]
+    fn the_confidence_stream_is_decimated_to_every_twentieth_tick() {
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        let mut stream_ticks = Vec::new();
+        for t in 0..100 {
+            if t % 5 == 0 {
+                fresh(&shared, &e, t, (t / 5 % 15) as u8);
+            }
+            let r = e.tick(&sample(t, 0.0, 0.0), &shared, &Health::default());
+            if decode(&r.frames)
+                .iter()
+                .any(|m| matches!(m, Message::Confidence(_)))
+            {
+                stream_ticks.push(t);
+            }
+        }
+        assert_eq!(stream_ticks, [0, 20, 40, 60, 80]);
+    }
+
+    #[test]
+    fn raw_adc_counts_go_through_calibration_to_an_event_frame() {
+        use crate::calib::NOMINAL;
+        use crate::sampling::FrontEnd;
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let mut fe = FrontEnd::new(NOMINAL, 5000);
+        let shared = Shared::new();
+        fresh(&shared, &e, 0, 0);
+        // Mid-rail: no force. Then 1 N against the motion (−205 counts at 4.88 mN/count).
+        let quiet = fe.process(0, &[2048, 2048, 2048, 2048]);
+        assert!(events(&e.tick(&quiet, &shared, &Health::default()).frames).is_empty());
+        let press = fe.process(1, &[2048 - 205, 2048, 2048, 2048]);
+        let ev = events(&e.tick(&press, &shared, &Health::default()).frames);
+        assert_eq!(ev.len(), 2);
+        assert!(ev.iter().all(|m| m.event == d.event("press").unwrap()));
+    }
+
+    #[test]
     fn timeouts_convert_to_ticks() {
         assert_eq!(ms_to_ticks(20, 5000), 100);
         assert_eq!(ms_to_ticks(1, 1500), 2);
         assert_eq!(ms_to_ticks(0, 5000), 1);
         assert_eq!(ms_to_ticks(u32::MAX, 5000), u32::MAX.div_ceil(1000));
+    }
+
+    #[test]
+    fn the_runner_times_ticks_counts_overruns_and_refused_frames() {
+        use crate::supervise::Task;
+        use core::cell::Cell;
+        let d = detector();
+        let mut e = Engine::new(&d, params()).unwrap();
+        let shared = Shared::new();
+        let mut runner = TickRunner::new(170_000_000, 5000);
+        // A cycle counter near its wrap that advances 40 000 cycles per read: every tick
+        // overruns its 34 000.
+        let clock = Cell::new(u32::MAX - 10_000);
+        let cycles = || {
+            let now = clock.get();
+            clock.set(now.wrapping_add(40_000));
+            now
+        };
+        // The first tick sends the stream and a heartbeat; the queue refuses everything.
+        let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &shared, cycles, |_| false);
+        assert!(r.heartbeat);
+        assert_eq!(runner.queue_full(), r.frames.len() as u32);
+        assert_eq!(
+            (runner.timing().overruns(), runner.timing().worst()),
+            (1, 40_000)
+        );
+        // Latched after the heartbeat was built: reported by the next one.
+        assert!(
+            shared
+                .latched
+                .peek()
+                .contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED)
+        );
+        assert_eq!(shared.now(), 0);
+        assert!(shared.liveness.round(Task::Detector as u8));
+        let mut reported = None;
+        for t in 1..=250 {
+            let r = runner.step(&mut e, &sample(t, 0.0, 0.0), &shared, cycles, |_| true);
+            if r.heartbeat {
+                reported = decode(&r.frames).into_iter().find_map(|m| match m {
+                    Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
+                    _ => None,
+                });
+            }
+        }
+        let f = reported.expect("a heartbeat at tick 250");
+        assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED));
+        // Every tick overran again, so OVERRUN is latched anew; TX_DROPPED was cleared.
+        assert!(shared.latched.peek().contains(FaultFlags::OVERRUN));
+        assert!(!shared.latched.peek().contains(FaultFlags::TX_DROPPED));
+        // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
+        assert_eq!(e.status().worst_tick, 2352);
+        assert_eq!(runner.timing().overruns(), 251);
     }
 }

@@ -14,4 +14,5 @@ pub mod shared;
 pub mod supervise;
 pub mod timing;
 pub mod tmp117;
+pub mod trigger;
 pub mod wiring;

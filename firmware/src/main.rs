@@ -1,13 +1,13 @@
 //! The board binary: clocks, peripherals and the embassy tasks around the lib.
 //!
 //! Tasks, each owning its peripheral and talking through the queues and [`Shared`]:
-//! - `sampler`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
+//! - `sampler_task`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
 //!   delivers them a block at a time; calibrated samples go to the detector's queue;
-//! - `detector`: one [`Engine::tick`] per sample, timed with the DWT cycle counter;
+//! - `detector_task`: one [`Engine::tick`] per sample, timed with the DWT cycle counter;
 //!   its frames go to the CAN transmit queue;
 //! - `temperature`: the TMP117 over I2C2, four times a second;
 //! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
-//! - `watchdog`: refreshes the IWDG while the sampler and the detector are alive.
+//! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
 //!
 //! Everything worth testing lives in the lib; this file is wiring.
 
@@ -15,7 +15,6 @@
 #![no_main]
 
 use core::num::{NonZeroU8, NonZeroU16};
-use core::sync::atomic::Ordering;
 
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
@@ -37,15 +36,13 @@ use {defmt_rtt as _, panic_probe as _};
 
 use detector_core::Detector;
 use detector_core::can::{CanFrame, FaultFlags, Receiver};
-use firmware::engine::{Engine, EngineParams, Health, LATCHED_FLAGS};
-use firmware::sampling::{
-    AdcSample, BLOCK_LEN, BLOCK_SCANS, DMA_LEN, FrontEnd, SCAN_LEN, TickClock, TriggerPeriod,
-};
+use firmware::engine::{Engine, EngineParams, TickRunner};
+use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
 use firmware::shared::{RawMutex, Shared};
 use firmware::supervise::{BusAction, BusState, BusSupervisor, Task};
-use firmware::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
+use firmware::timing::budget_cycles;
 use firmware::tmp117::{self, SensorHealth, Tmp117};
-use firmware::wiring::{CORE_CLOCK_HZ, MAX_RATE_ERROR_PPM, SAMPLE_TIMER_CLOCK_HZ};
+use firmware::wiring::CORE_CLOCK_HZ;
 use firmware::{boot, calib, can_timing, reset};
 
 bind_interrupts!(struct Irqs {
@@ -77,7 +74,8 @@ static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 const WATCHDOG_TIMEOUT_US: u32 = 200_000;
 /// How often the watchdog task looks for the critical tasks' check-ins.
 const WATCHDOG_ROUND: Duration = Duration::from_millis(50);
-/// Temperature reading period (the TMP117 converts every 250 ms).
+/// Temperature reading period: a dead sensor is noticed within 0.75 s (it converts once
+/// a second, so most readings repeat the last value).
 const TEMPERATURE_PERIOD: Duration = Duration::from_millis(250);
 /// I2C transaction timeout: a 4-byte transaction takes under 0.5 ms at 100 kHz.
 const I2C_TIMEOUT_MS: u32 = 5;
@@ -142,7 +140,7 @@ struct Board {
     receiver: Receiver,
     adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    front_end: FrontEnd,
+    sampler: Sampler,
     sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
     can_tx: CanTx<'static>,
     can_rx: CanRx<'static>,
@@ -159,16 +157,7 @@ fn main() -> ! {
     let executor = EXECUTOR.init(Executor::new());
     executor.run(move |spawner: Spawner| {
         spawn!(spawner, detector_task(b.engine, b.shared, b.rate_hz));
-        spawn!(
-            spawner,
-            sampler(
-                b.adc,
-                b.timer,
-                b.front_end,
-                TickClock::new(b.rate_hz),
-                b.shared
-            )
-        );
+        spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, b.shared));
         spawn!(spawner, temperature(b.sensor, b.shared));
         spawn!(spawner, can_rx(b.can_rx, b.receiver, b.shared));
         spawn!(spawner, can_tx(b.can_tx, b.shared));
@@ -180,12 +169,12 @@ fn main() -> ! {
 /// Clocks, the detector, the peripherals.
 #[inline(never)]
 fn setup() -> Board {
-    let p = embassy_stm32::init(clocks());
-
-    // The reset reason, read once and cleared so the next boot reports its own.
+    // The reset reason, read before the HAL touches the RCC, and cleared so the next
+    // boot reports its own.
     let csr = pac::RCC.csr().read().0;
     pac::RCC.csr().modify(|w| w.set_rmvf(true));
     let reset = reset::reset_reason(csr);
+    let p = embassy_stm32::init(clocks());
     info!(
         "fingertip node {=u8}, reset: {=str}, config {=str} crc32 {=u32:#010x}",
         boot::NODE_ID.get(),
@@ -204,20 +193,14 @@ fn setup() -> Board {
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
 
-    // The detector, built from the embedded configuration before any task runs, while
-    // the whole stack is free (the decoded configuration is about 12 KiB).
-    // The detector first, while the whole stack is free: decoding the configuration
-    // and building the detector are the deepest stack of the firmware.
+    // The detector before anything else is built on the stack: decoding the
+    // configuration and building the detector are the deepest stack of the firmware.
     let detector = build_detector();
     let rate = detector.rate_hz();
-    let trigger = match TriggerPeriod::new(SAMPLE_TIMER_CLOCK_HZ, rate, MAX_RATE_ERROR_PPM) {
-        Ok(t) => t,
-        Err(e) => defmt::panic!("sample rate: {}", e),
-    };
     let rate_hz = (rate + 0.5) as u32;
     let params = EngineParams::new(boot::NODE_ID, reset, boot::CONFIG_CHECKSUM);
     // In a static, not moved into the task: an async task's arguments are stored in
-    // its future twice (as arguments and as locals), and the engine is 2 KiB.
+    // its future twice (as arguments and as locals), and the engine is 3 KiB.
     let engine: &'static mut Engine<'static> = match Engine::new(detector, params) {
         Ok(e) => ENGINE.init(e),
         Err(e) => defmt::panic!("engine: {}", e),
@@ -242,17 +225,20 @@ fn setup() -> Board {
         embassy_stm32::adc::Exten::RISING_EDGE,
     );
     let timer = Timer::new(p.TIM6);
-    timer.set_period_clocks(u64::from(trigger.clocks), RoundTo::Slower);
+    // The period for the configuration's rate, computed and checked by build.rs.
+    timer.set_period_clocks(u64::from(boot::TRIGGER_CLOCKS), RoundTo::Slower);
+    // Load the prescaler now (it is buffered until an update), before TRGO is routed to
+    // the ADC so this update triggers nothing.
+    timer.generate_update_event();
     // TRGO on every update event: one ADC trigger per period.
     timer
         .regs_basic()
         .cr2()
         .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
     info!(
-        "sampling at {=u64} mHz ({=u32} timer clocks, {=u32} ppm), budget {=u32} cycles per tick",
-        trigger.actual_mhz,
-        trigger.clocks,
-        trigger.error_ppm,
+        "sampling at {=u64} mHz ({=u32} timer clocks), budget {=u32} cycles per tick",
+        boot::TRIGGER_RATE_MHZ,
+        boot::TRIGGER_CLOCKS,
         budget_cycles(CORE_CLOCK_HZ, rate_hz)
     );
 
@@ -327,7 +313,7 @@ fn setup() -> Board {
         receiver,
         adc: ring,
         timer,
-        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
+        sampler: Sampler::new(calib::NOMINAL, rate_hz),
         sensor,
         can_tx: can_tx_half,
         can_rx: can_rx_half,
@@ -347,14 +333,12 @@ fn build_detector() -> &'static Detector {
     })
 }
 
-/// Reads the ADC's DMA ring a block at a time, numbers the scans with ticks, calibrates
-/// them and queues them for the detector.
+/// Reads the ADC's DMA ring a block at a time and hands it to the lib's [`Sampler`].
 #[embassy_executor::task]
-async fn sampler(
+async fn sampler_task(
     mut adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    mut front_end: FrontEnd,
-    mut clock: TickClock,
+    mut sampler: Sampler,
     shared: &'static Shared,
 ) {
     let mut block = [0u16; BLOCK_LEN];
@@ -363,27 +347,20 @@ async fn sampler(
     loop {
         match adc.read(&mut block).await {
             Ok(_) => {
-                let first = clock.on_block(BLOCK_SCANS as u32, Instant::now().as_micros());
-                front_end.set_temperature(shared.temperature());
-                let mut tick = first;
-                for scan in block.chunks_exact(SCAN_LEN) {
-                    let mut raw = [0u16; SCAN_LEN];
-                    raw.copy_from_slice(scan);
-                    let sample = front_end.process(tick, &raw);
-                    if SAMPLES.try_send(sample).is_err() {
-                        // The detector is behind: this tick is lost, and counted.
-                        clock.on_dropped(1);
-                    }
-                    tick = tick.wrapping_add(1);
-                }
-                shared.now.store(tick.wrapping_sub(1), Ordering::Relaxed);
-                shared.counters.lost_samples.set(clock.lost());
-                shared.counters.rail_episodes.set(front_end.rail_episodes());
+                let now = Instant::now().as_micros();
+                sampler.on_block(&block, now, shared.temperature(), |s| {
+                    SAMPLES.try_send(s).is_ok()
+                });
+                shared.counters.lost_samples.set(sampler.clock.lost());
+                shared
+                    .counters
+                    .rail_episodes
+                    .set(sampler.front_end.rail_episodes());
                 shared.liveness.check_in(Task::Sampler);
             }
             Err(_) => {
                 // The DMA lapped us; the ring restarts at the next aligned scan.
-                clock.on_overrun();
+                sampler.on_overrun();
                 shared.counters.adc_overruns.add(1);
                 shared.latched.raise(FaultFlags::OVERRUN);
             }
@@ -391,53 +368,23 @@ async fn sampler(
     }
 }
 
-/// One engine tick per sample, timed; frames to the CAN queue.
+/// One engine tick per sample, timed with the DWT cycle counter; frames to the CAN queue.
 #[embassy_executor::task]
 async fn detector_task(
     engine: &'static mut Engine<'static>,
     shared: &'static Shared,
     rate_hz: u32,
 ) {
-    let mut timing = TickTiming::new(budget_cycles(CORE_CLOCK_HZ, rate_hz));
-    let mut worst_tenths = 0u16;
-    let mut queue_full = 0u32;
+    let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
     let mut last_masks = (0u8, 0u8);
     let detector = engine.detector();
     loop {
         let sample = SAMPLES.receive().await;
-        let start = DWT::cycle_count();
-        let counters = &shared.counters;
-        let health = Health {
-            overruns: timing.overruns(),
-            worst_tick: worst_tenths,
-            bus_errors: counters.bus_errors(),
-            tx_dropped: queue_full.saturating_add(counters.tx_lost.get()),
-            latched: shared.latched.peek(),
-            sensor_fault: shared.sensor_fault.load(Ordering::Relaxed),
-        };
-        let result = engine.tick(&sample, shared, &health);
-        for frame in result.frames.iter() {
-            if TX_FRAMES.try_send(*frame).is_err() {
-                queue_full = queue_full.saturating_add(1);
-                shared.latched.raise(FaultFlags::TX_DROPPED);
-            }
-        }
-        if result.heartbeat {
-            shared
-                .latched
-                .clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
-        }
-        let cycles = DWT::cycle_count().wrapping_sub(start);
-        let previous_worst = timing.worst();
-        if timing.record(cycles) {
-            shared.latched.raise(FaultFlags::OVERRUN);
-        }
-        if timing.worst() != previous_worst {
-            worst_tenths = cycles_to_tenths_us(timing.worst(), CORE_CLOCK_HZ);
-        }
-        shared.liveness.check_in(Task::Detector);
+        let result = runner.step(engine, &sample, shared, DWT::cycle_count, |f| {
+            TX_FRAMES.try_send(f).is_ok()
+        });
 
-        // Logs, outside the timed part.
+        // Logs, after the timed part.
         let out = &result.output;
         for d in out.decisions.iter() {
             let name = detector
@@ -473,21 +420,7 @@ async fn temperature(
     let mut health = SensorHealth::new(SENSOR_TRIP);
     let mut ticker = Ticker::every(TEMPERATURE_PERIOD);
     loop {
-        let was_faulty = health.is_faulty();
-        if health.needs_init() {
-            let r = sensor.init().await;
-            health.record(r.as_ref().map(|()| None));
-        } else {
-            let r = sensor.read_celsius().await;
-            health.record(r.as_ref().map(|t| Some(*t)));
-        }
-        shared.set_temperature(health.temperature());
-        shared
-            .sensor_fault
-            .store(health.is_faulty(), Ordering::Relaxed);
-        shared.counters.sensor_errors.set(health.errors().total());
-        shared.counters.sensor_timeouts.set(health.errors().timeout);
-        if health.is_faulty() != was_faulty {
+        if tmp117::poll_sensor(&mut sensor, &mut health, shared).await {
             if health.is_faulty() {
                 warn!("temperature sensor not answering: force drift compensation frozen");
             } else {
@@ -498,7 +431,7 @@ async fn temperature(
     }
 }
 
-/// Hands every received frame to the core's receiver, stamped with the newest tick.
+/// Hands every received frame to the core's receiver, stamped with the detector's tick.
 #[embassy_executor::task]
 async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, shared: &'static Shared) {
     loop {

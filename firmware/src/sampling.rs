@@ -28,70 +28,6 @@ pub const BLOCK_LEN: usize = BLOCK_SCANS * SCAN_LEN;
 /// Samples (u16) in the circular DMA buffer: two halves.
 pub const DMA_LEN: usize = 2 * BLOCK_LEN;
 
-/// A sample rate the trigger timer cannot make.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-#[non_exhaustive]
-pub enum RateError {
-    /// The rate is not finite and positive, or above the timer clock.
-    OutOfRange {
-        /// The requested rate, Hz.
-        rate_hz: f32,
-    },
-    /// The nearest rate the timer makes is off by more than allowed.
-    Inexact {
-        /// The requested rate, Hz.
-        rate_hz: f32,
-        /// The error of the nearest rate, parts per million.
-        error_ppm: u32,
-    },
-}
-
-/// The ADC trigger timer's period for a detector rate.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct TriggerPeriod {
-    /// Timer clocks per trigger (the timer counts this many clocks per period).
-    pub clocks: u32,
-    /// The rate this period makes, in mHz (millihertz).
-    pub actual_mhz: u64,
-    /// Its error against the requested rate, parts per million (rounded up).
-    pub error_ppm: u32,
-}
-
-impl TriggerPeriod {
-    /// The period nearest to `rate_hz` on a timer clocked at `timer_hz`; an error if its
-    /// rate is off by more than `max_error_ppm`. Integer arithmetic (in millihertz) once
-    /// the rate is read, so no soft-float `f64` code lands in the image.
-    pub fn new(
-        timer_hz: u32,
-        rate_hz: f32,
-        max_error_ppm: u32,
-    ) -> Result<TriggerPeriod, RateError> {
-        if !(rate_hz.is_finite() && rate_hz >= 0.001 && rate_hz <= timer_hz as f32) {
-            return Err(RateError::OutOfRange { rate_hz });
-        }
-        // f32 holds every whole number of mHz below 16.7 kHz exactly, and rates up to
-        // the core's 50 kHz to within 4 mHz.
-        let rate_mhz = (rate_hz * 1000.0 + 0.5) as u64;
-        let timer_mhz = u64::from(timer_hz) * 1000;
-        let clocks = ((timer_mhz + rate_mhz / 2) / rate_mhz).clamp(1, u64::from(u32::MAX));
-        // |timer − rate × clocks| / (rate × clocks), in ppm, rounded up.
-        let made = rate_mhz * clocks;
-        let diff = timer_mhz.abs_diff(made);
-        let error_ppm = (diff * 1_000_000).div_ceil(made);
-        let error_ppm = u32::try_from(error_ppm).unwrap_or(u32::MAX);
-        if error_ppm > max_error_ppm {
-            return Err(RateError::Inexact { rate_hz, error_ppm });
-        }
-        Ok(TriggerPeriod {
-            clocks: clocks as u32,
-            actual_mhz: (timer_mhz + clocks / 2) / clocks,
-            error_ppm,
-        })
-    }
-}
-
 /// Numbers the scans with detector ticks and counts the ones lost.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -243,39 +179,60 @@ impl FrontEnd {
     }
 }
 
+/// The sampler task's work for one DMA block: tick numbering, calibration, the rail
+/// watch, and the hand-over to the detector's queue.
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Sampler {
+    /// Tick numbering and lost-scan accounting.
+    pub clock: TickClock,
+    /// Calibration and rail watch.
+    pub front_end: FrontEnd,
+}
+
+impl Sampler {
+    /// A sampler at `rate_hz` with these calibrations.
+    pub fn new(calibration: [Calibration; SCAN_LEN], rate_hz: u32) -> Sampler {
+        Sampler {
+            clock: TickClock::new(rate_hz),
+            front_end: FrontEnd::new(calibration, rate_hz),
+        }
+    }
+
+    /// A block of [`BLOCK_SCANS`] scans, completed at about `now_us`, with the board
+    /// temperature `temperature`; each calibrated sample goes to `queue`, which returns
+    /// `false` when it is full (that tick is then lost and counted). Returns the tick of
+    /// the block's last scan.
+    pub fn on_block(
+        &mut self,
+        block: &[u16; BLOCK_LEN],
+        now_us: u64,
+        temperature: Option<Signal>,
+        mut queue: impl FnMut(AdcSample) -> bool,
+    ) -> Tick {
+        let mut tick = self.clock.on_block(BLOCK_SCANS as u32, now_us);
+        self.front_end.set_temperature(temperature);
+        for scan in block.chunks_exact(SCAN_LEN) {
+            let mut raw = [0u16; SCAN_LEN];
+            raw.copy_from_slice(scan);
+            if !queue(self.front_end.process(tick, &raw)) {
+                self.clock.on_dropped(1);
+            }
+            tick = tick.wrapping_add(1);
+        }
+        tick.wrapping_sub(1)
+    }
+
+    /// The DMA overran the reader.
+    pub fn on_overrun(&mut self) {
+        self.clock.on_overrun();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::calib::NOMINAL;
-
-    #[test]
-    fn the_default_rate_is_exact_on_the_170_mhz_timer() {
-        let p = TriggerPeriod::new(170_000_000, 5000.0, 100).unwrap();
-        assert_eq!(p.clocks, 34_000);
-        assert_eq!(p.actual_mhz, 5_000_000);
-        assert_eq!(p.error_ppm, 0);
-    }
-
-    #[test]
-    fn inexact_and_impossible_rates_are_refused() {
-        // 170 MHz / 7 kHz = 24285.71 clocks: 24286 gives 6999.918 Hz, 12 ppm off.
-        let p = TriggerPeriod::new(170_000_000, 7000.0, 100).unwrap();
-        assert_eq!(p.clocks, 24_286);
-        assert_eq!(p.error_ppm, 12);
-        assert_eq!(
-            TriggerPeriod::new(170_000_000, 7000.0, 10),
-            Err(RateError::Inexact {
-                rate_hz: 7000.0,
-                error_ppm: 12
-            })
-        );
-        for bad in [0.0, -1.0, f32::NAN, f32::INFINITY, 2e8] {
-            assert!(matches!(
-                TriggerPeriod::new(170_000_000, bad, 100),
-                Err(RateError::OutOfRange { .. })
-            ));
-        }
-    }
 
     #[test]
     fn ticks_count_scans_without_drift() {
@@ -358,5 +315,33 @@ mod tests {
             fe.process(1, &[2058, 2058, 2048, 2048]).values[1],
             Signal::ZERO
         );
+    }
+
+    #[test]
+    fn a_block_becomes_five_calibrated_samples_and_a_full_queue_loses_ticks() {
+        let mut s = Sampler::new(NOMINAL, 5000);
+        let mut block = [2048u16; BLOCK_LEN];
+        block[SCAN_LEN] = 2048 + 205; // force_x of the second scan: +1 N
+        let mut got = Vec::new();
+        let last = s.on_block(&block, 1_000, None, |x| {
+            got.push(x);
+            true
+        });
+        assert_eq!(last, 4);
+        assert_eq!(
+            got.iter().map(|x| x.tick).collect::<Vec<_>>(),
+            [0, 1, 2, 3, 4]
+        );
+        assert!((got[1].values[0].to_f64() - 1.0).abs() < 0.01);
+        // The queue takes two and is full: three ticks lost, numbering goes on.
+        let mut room = 2;
+        let last = s.on_block(&block, 2_000, None, |_| {
+            room -= 1;
+            room >= 0
+        });
+        assert_eq!((last, s.clock.lost()), (9, 3));
+        s.on_overrun();
+        assert_eq!(s.on_block(&block, 5_000, None, |_| true), 24);
+        assert_eq!(s.clock.lost(), 3 + 10);
     }
 }

@@ -139,7 +139,10 @@ impl Counters {
 /// The shared state. Created once at boot (the receive state has no `const`
 /// constructor) and handed to every task as `&'static`.
 pub struct Shared {
-    /// The tick of the newest scan sampled: the clock of the CAN receive task.
+    /// The tick the detector is at: the clock the CAN receive task stamps frames with.
+    /// Not the newest tick sampled, which runs up to a queue's length ahead: a frame
+    /// stamped after the tick being judged has a negative age, which the core reads as
+    /// stale.
     pub now: AtomicU32,
     /// The core's CAN receive state.
     pub rx: Mutex<RawMutex, RefCell<RxState>>,
@@ -176,7 +179,7 @@ impl Shared {
         }
     }
 
-    /// The newest tick sampled.
+    /// The tick the detector is at.
     pub fn now(&self) -> Tick {
         self.now.load(Ordering::Relaxed)
     }

@@ -32,10 +32,16 @@ const REG_DEVICE_ID: u8 = 0x0F;
 /// The raw result before the first conversion completes (−256 °C).
 const NOT_READY: i16 = i16::MIN;
 
-/// Configuration written at start: continuous conversion (MOD = 00), 8 averages
-/// (AVG = 01), 250 ms cycle (CONV = 010): a fresh, averaged reading four times a second,
-/// far faster than the board's thermal time constant.
-pub const CONFIGURATION: u16 = (0b010 << 7) | (0b01 << 5);
+/// The conversion-mode field (MOD, bits 11..10) of the configuration register: `00` and
+/// `10` convert continuously, `01` is shutdown, `11` one-shot.
+const MOD_MASK: u16 = 0b11 << 10;
+const MOD_SHUTDOWN: u16 = 0b01 << 10;
+const MOD_ONE_SHOT: u16 = 0b11 << 10;
+
+/// The configuration the TMP117 powers up with from the factory (reset value `0x0220`):
+/// continuous conversion, 8 averages, a 1 s cycle. The driver only reads the sensor; a
+/// fresh value every second is far faster than the board's thermal time constant.
+pub const FACTORY_CONFIGURATION: u16 = 0x0220;
 
 /// What went wrong talking to the sensor.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -53,6 +59,12 @@ pub enum Error<E> {
     },
     /// No conversion has completed yet (the result register still reads −256 °C).
     NotReady,
+    /// The sensor is not converting continuously (its EEPROM holds shutdown or one-shot
+    /// mode): the configuration register read.
+    NotConverting {
+        /// The configuration register.
+        configuration: u16,
+    },
 }
 
 impl<E: embedded_hal::i2c::Error> Error<E> {
@@ -73,6 +85,10 @@ impl<E: core::fmt::Debug> core::fmt::Display for Error<E> {
             Error::Timeout => write!(f, "I2C transaction timed out"),
             Error::WrongDevice { id } => write!(f, "device id {id:#06x} is not a TMP117's"),
             Error::NotReady => write!(f, "no temperature conversion completed yet"),
+            Error::NotConverting { configuration } => write!(
+                f,
+                "configuration {configuration:#06x} is not continuous conversion"
+            ),
         }
     }
 }
@@ -103,24 +119,20 @@ impl<I: I2c, D: DelayNs> Tmp117<I, D> {
         }
     }
 
-    /// Checks the device id and writes [`CONFIGURATION`].
+    /// Checks the device id and that the sensor converts continuously (as it does from
+    /// the factory, [`FACTORY_CONFIGURATION`]). Reads only: the driver never writes the
+    /// sensor, so one bus operation (pointer write, then read) serves every access.
     pub async fn init(&mut self) -> Result<(), Error<I::Error>> {
         let id = self.read_register(REG_DEVICE_ID).await?;
         if id & 0x0FFF != DEVICE_ID {
             return Err(Error::WrongDevice { id });
         }
-        let [hi, lo] = CONFIGURATION.to_be_bytes();
-        let Tmp117 {
-            i2c,
-            delay,
-            address,
-            timeout_ms,
-        } = self;
-        bounded(
-            i2c.write(*address, &[REG_CONFIGURATION, hi, lo]),
-            delay.delay_ms(*timeout_ms),
-        )
-        .await
+        let configuration = self.read_register(REG_CONFIGURATION).await?;
+        let mode = configuration & MOD_MASK;
+        if mode == MOD_SHUTDOWN || mode == MOD_ONE_SHOT {
+            return Err(Error::NotConverting { configuration });
+        }
+        Ok(())
     }
 
     /// The latest temperature, °C.
@@ -176,7 +188,7 @@ pub struct SensorErrors {
     pub timeout: u32,
     /// Other bus errors (arbitration, bus error, overrun...).
     pub bus: u32,
-    /// Wrong device id, or no result yet.
+    /// Wrong device id, not converting, or no result yet.
     pub invalid: u32,
 }
 
@@ -238,7 +250,9 @@ impl SensorHealth {
             Err(e) => {
                 let n = match e {
                     Error::Timeout => &mut self.errors.timeout,
-                    Error::WrongDevice { .. } | Error::NotReady => &mut self.errors.invalid,
+                    Error::WrongDevice { .. } | Error::NotReady | Error::NotConverting { .. } => {
+                        &mut self.errors.invalid
+                    }
                     Error::Bus(b) => match b.kind() {
                         ErrorKind::NoAcknowledge(_) => &mut self.errors.nack,
                         _ => &mut self.errors.bus,
@@ -285,6 +299,32 @@ impl SensorHealth {
     }
 }
 
+/// One round of the temperature task: (re)initializes the sensor while it needs it,
+/// otherwise reads it; records the outcome; publishes the temperature (or `None` while
+/// faulty), the fault flag and the error counts in `shared`. Returns whether the fault
+/// flag changed, for the log.
+pub async fn poll_sensor<I: I2c, D: DelayNs>(
+    sensor: &mut Tmp117<I, D>,
+    health: &mut SensorHealth,
+    shared: &crate::shared::Shared,
+) -> bool {
+    let was_faulty = health.is_faulty();
+    if health.needs_init() {
+        let r = sensor.init().await;
+        health.record(r.as_ref().map(|()| None));
+    } else {
+        let r = sensor.read_celsius().await;
+        health.record(r.as_ref().map(|t| Some(*t)));
+    }
+    shared.set_temperature(health.temperature());
+    shared
+        .sensor_fault
+        .store(health.is_faulty(), core::sync::atomic::Ordering::Relaxed);
+    shared.counters.sensor_errors.set(health.errors().total());
+    shared.counters.sensor_timeouts.set(health.errors().timeout);
+    health.is_faulty() != was_faulty
+}
+
 /// Whether an error is the sensor not acknowledging its address (absent or unpowered),
 /// as opposed to a failure in the middle of a transfer.
 pub fn is_address_nack<E: embedded_hal::i2c::Error>(e: &Error<E>) -> bool {
@@ -328,9 +368,8 @@ mod tests {
         Transaction::write_read(A, vec![0x0F], id.to_be_bytes().to_vec())
     }
 
-    fn config_write() -> Transaction {
-        let [hi, lo] = CONFIGURATION.to_be_bytes();
-        Transaction::write(A, vec![0x01, hi, lo])
+    fn config_read(config: u16) -> Transaction {
+        Transaction::write_read(A, vec![0x01], config.to_be_bytes().to_vec())
     }
 
     #[test]
@@ -346,16 +385,33 @@ mod tests {
     }
 
     #[test]
-    fn the_configuration_word_is_continuous_8_averages_250_ms() {
-        assert_eq!(CONFIGURATION, 0x0120);
+    fn a_sensor_not_converting_is_refused() {
+        for config in [0x0620u16, 0x0E20] {
+            let expectations = [id_read(0x0117), config_read(config)];
+            let mut i2c = Mock::new(&expectations);
+            let mut t = Tmp117::new(&mut i2c, Forever, A, 5);
+            assert_eq!(
+                block_on(t.init()),
+                Err(Error::NotConverting {
+                    configuration: config
+                })
+            );
+            i2c.done();
+        }
+        // MOD = 10 reads as continuous too.
+        let expectations = [id_read(0x0117), config_read(0x0A20)];
+        let mut i2c = Mock::new(&expectations);
+        let mut t = Tmp117::new(&mut i2c, Forever, A, 5);
+        assert_eq!(block_on(t.init()), Ok(()));
+        i2c.done();
     }
 
     #[test]
-    fn init_checks_the_id_then_configures_and_reads() {
+    fn init_checks_the_id_and_the_mode_then_reads() {
         let expectations = [
             // Revision bits (15..12) are ignored.
             id_read(0x1117),
-            config_write(),
+            config_read(FACTORY_CONFIGURATION),
             Transaction::write_read(A, vec![0x00], vec![0x0C, 0x80]),
         ];
         let mut i2c = Mock::new(&expectations);
@@ -366,7 +422,7 @@ mod tests {
     }
 
     #[test]
-    fn a_wrong_device_is_refused_without_being_written() {
+    fn a_wrong_device_is_refused_before_anything_else() {
         let expectations = [id_read(0x1116)];
         let mut i2c = Mock::new(&expectations);
         let mut t = Tmp117::new(&mut i2c, Forever, A, 5);
@@ -451,5 +507,46 @@ mod tests {
         h.record::<ErrorKind>(Ok(Some(Signal::from_f64(31.0))));
         assert!(!h.is_faulty());
         assert_eq!(h.temperature(), Some(Signal::from_f64(31.0)));
+    }
+
+    #[test]
+    fn a_sensor_that_stops_answering_is_flagged_counted_and_recovers() {
+        use crate::shared::Shared;
+        use core::sync::atomic::Ordering;
+        let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
+        let temp = |raw: u16| Transaction::write_read(A, vec![0x00], raw.to_be_bytes().to_vec());
+        let dead = || Transaction::write_read(A, vec![0x0F], vec![0, 0]).with_error(nack);
+        let expectations = [
+            id_read(0x0117),
+            config_read(FACTORY_CONFIGURATION),
+            temp(0x0C80), // 25 °C
+            // Unplugged: the read fails, then every re-initialization.
+            Transaction::write_read(A, vec![0x00], vec![0, 0]).with_error(nack),
+            dead(),
+            dead(),
+            // Back.
+            id_read(0x0117),
+            config_read(FACTORY_CONFIGURATION),
+            temp(0x0D00), // 26 °C
+        ];
+        let mut i2c = Mock::new(&expectations);
+        let mut sensor = Tmp117::new(&mut i2c, Forever, A, 5);
+        let mut health = SensorHealth::new(3);
+        let shared = Shared::new();
+        let mut poll = || block_on(poll_sensor(&mut sensor, &mut health, &shared));
+        assert!(!poll()); // init
+        assert!(!poll()); // 25 °C
+        assert_eq!(shared.temperature(), Some(Signal::from_f64(25.0)));
+        assert!(!poll());
+        assert!(!poll());
+        assert!(poll(), "third failure in a row: faulty");
+        assert!(shared.sensor_fault.load(Ordering::Relaxed));
+        assert_eq!(shared.temperature(), None);
+        assert_eq!(shared.counters.sensor_errors.get(), 3);
+        assert!(!poll()); // init again: still faulty until a reading
+        assert!(poll(), "a good reading clears the fault");
+        assert!(!shared.sensor_fault.load(Ordering::Relaxed));
+        assert_eq!(shared.temperature(), Some(Signal::from_f64(26.0)));
+        i2c.done();
     }
 }
