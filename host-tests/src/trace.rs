@@ -836,8 +836,10 @@ fn check_time(
     Ok(1.0 / period)
 }
 
-/// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it to `path`.
-fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
+/// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it to `path`,
+/// so that a failure never leaves a partial file looking complete. Every tool output goes
+/// through here.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
     let file_name = path
         .file_name()
         .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "not a file path"))?;

@@ -363,8 +363,7 @@ fn truth_of(trace: &Trace) -> Option<(String, f64)> {
         .and_then(|(row, event)| trace.time().get(row).map(|&t| (event.to_string(), t)))
 }
 
-/// Writes per-tick event confidences and feature values as CSV, through a temporary file so a failure never leaves
-/// a partial file behind.
+/// Writes per-tick event confidences and feature values as CSV (atomically).
 fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -> Result<()> {
     let mut text = String::new();
     let _ = writeln!(
@@ -398,13 +397,7 @@ fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -
 }
 
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, bytes)
-        .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            format!("{}: {e}", path.display())
-        })
+    host_tests::trace::write_atomically(path, bytes).map_err(|e| format!("{}: {e}", path.display()))
 }
 
 fn describe(d: &DecisionRecord, truth: Option<&(String, f64)>) -> String {
