@@ -4,7 +4,8 @@
 //!   `FINGERTIP_CONFIG`, relative to the workspace root), parsed and validated with the
 //!   core's `std` feature (a bad configuration fails the build with the core's message),
 //!   checked against the channels the board can feed and the sample timer's clock, and
-//!   written as postcard bytes (`config.postcard`) that the chip decodes at boot;
+//!   built into a detector and written as its image (`detector.image`), which the chip
+//!   loads in place at boot;
 //! - `build_consts.rs`: the configuration's CRC-32 (reported in the status heartbeat),
 //!   its source path, the sample timer's period for its rate, and the CAN node id from
 //!   `FINGERTIP_NODE_ID` (0..=15, default 0);
@@ -18,7 +19,7 @@ use std::fmt::Write as _;
 use std::fs;
 use std::path::PathBuf;
 
-use detector_core::Config;
+use detector_core::{Config, Detector};
 
 #[allow(dead_code)]
 #[path = "src/wiring.rs"]
@@ -67,12 +68,17 @@ fn main() -> Result<()> {
         )
     })?;
 
-    let bytes = postcard::to_stdvec(&config)?;
-    let back: Config = postcard::from_bytes(&bytes)?;
-    if back != config {
-        return Err(format!("{config_rel} does not survive a postcard round trip").into());
+    // The chip loads the built detector as an image, in place: no configuration, no
+    // serde and no build on the chip (they would need far more stack than it has).
+    let detector = Detector::build(&config).map_err(|e| format!("{config_rel}: {e}"))?;
+    let bytes = detector.to_image();
+    let mut back = Detector::empty();
+    back.load_image(&bytes)
+        .map_err(|e| format!("{config_rel}: the detector image does not load back: {e}"))?;
+    if back != detector {
+        return Err(format!("{config_rel}: the detector image does not load back the same").into());
     }
-    fs::write(out.join("config.postcard"), &bytes)?;
+    fs::write(out.join("detector.image"), &bytes)?;
 
     let node = match env::var("FINGERTIP_NODE_ID") {
         Ok(s) => s
@@ -87,7 +93,7 @@ fn main() -> Result<()> {
     let mut consts = String::new();
     writeln!(
         consts,
-        "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded configuration's postcard bytes."
+        "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded detector image."
     )?;
     writeln!(
         consts,

@@ -14,6 +14,9 @@
 //! [`Cdf::new`] validates it and precomputes the reciprocals so that evaluating costs one
 //! 32×32→64 multiplication per shoulder and no division.
 
+#[cfg(feature = "std")]
+use crate::image::Writer;
+use crate::image::{ImageError, Reader};
 use crate::num::{Confidence, Signal};
 
 /// A confidence distribution function as a user describes it, parameters in the feature's
@@ -331,6 +334,86 @@ impl Cdf {
             Shape::Below(t) => u32::from(x <= t) << 15,
         };
         Confidence::from_bits_clamped(q)
+    }
+}
+
+impl Ramp {
+    #[cfg(feature = "std")]
+    fn write_image(&self, w: &mut Writer) {
+        w.i32(self.start);
+        w.u32(self.span);
+        w.u32(self.mul);
+        w.u8(self.up);
+        w.u8(self.down);
+    }
+
+    fn read_image(r: &mut Reader<'_>) -> Result<Ramp, ImageError> {
+        let ramp = Ramp {
+            start: r.i32()?,
+            span: r.u32()?,
+            mul: r.u32()?,
+            up: r.u8()?,
+            down: r.u8()?,
+        };
+        // What `Ramp::new` can produce: shifts keep the distance below 2^17.
+        if ramp.span == 0 || ramp.up > 16 || ramp.down > 15 || (ramp.up > 0 && ramp.down > 0) {
+            return Err(ImageError::Invalid("CDF ramp"));
+        }
+        Ok(ramp)
+    }
+}
+
+impl Cdf {
+    /// Appends this function to a detector image.
+    #[cfg(feature = "std")]
+    pub(crate) fn write_image(&self, w: &mut Writer) {
+        match self.0 {
+            Shape::Rising(r) => {
+                w.u8(0);
+                r.write_image(w);
+            }
+            Shape::Falling(r) => {
+                w.u8(1);
+                r.write_image(w);
+            }
+            Shape::Bell { center, ramp } => {
+                w.u8(2);
+                w.i32(center);
+                ramp.write_image(w);
+            }
+            Shape::FlatBell { rise, fall } => {
+                w.u8(3);
+                rise.write_image(w);
+                fall.write_image(w);
+            }
+            Shape::Above(t) => {
+                w.u8(4);
+                w.i32(t);
+            }
+            Shape::Below(t) => {
+                w.u8(5);
+                w.i32(t);
+            }
+        }
+    }
+
+    /// Reads a function from a detector image.
+    pub(crate) fn read_image(r: &mut Reader<'_>) -> Result<Cdf, ImageError> {
+        Ok(Cdf(match r.u8()? {
+            0 => Shape::Rising(Ramp::read_image(r)?),
+            1 => Shape::Falling(Ramp::read_image(r)?),
+            2 => Shape::Bell {
+                center: r.i32()?,
+                ramp: Ramp::read_image(r)?,
+            },
+            3 => Shape::FlatBell {
+                rise: Ramp::read_image(r)?,
+                fall: Ramp::read_image(r)?,
+            },
+            4 => Shape::Above(r.i32()?),
+            5 => Shape::Below(r.i32()?),
+            _ => return Err(ImageError::Invalid("CDF shape")),
+        }))
     }
 }
 

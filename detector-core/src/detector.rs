@@ -9,7 +9,10 @@ use heapless::Vec;
 
 use crate::cdf::Cdf;
 use crate::config::{Config, ConfigError, Item, LevelSpec, Name, Problem};
-use crate::feature::{STE_POOL, Stage, StageState};
+use crate::feature::{STE_POOL, Stage, StageState, taps_valid};
+use crate::image::{ImageError, Reader};
+#[cfg(feature = "std")]
+use crate::image::{MAGIC, Writer};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::{MAX_CHANNELS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS};
 
@@ -498,6 +501,190 @@ impl Detector {
             events,
             phases,
         })
+    }
+
+    /// A detector with nothing configured: no channel, no event, every tick evaluates
+    /// nothing. `const`, so a detector can be a static in `.bss` that
+    /// [`Detector::load_image`] fills in place.
+    pub const fn empty() -> Detector {
+        Detector {
+            rate_hz: 0.0,
+            channel_names: Vec::new(),
+            channel_scales: Vec::new(),
+            feature_names: Vec::new(),
+            event_names: Vec::new(),
+            phase_names: Vec::new(),
+            stages: Vec::new(),
+            slot_channels: [0; MAX_SLOTS],
+            weights: [0; STE_POOL],
+            events: Vec::new(),
+            phases: Vec::new(),
+        }
+    }
+
+    /// This detector as an image (see [`crate::image`]): what the firmware embeds.
+    #[cfg(feature = "std")]
+    pub fn to_image(&self) -> std::vec::Vec<u8> {
+        let mut w = Writer::default();
+        w.0.extend_from_slice(&MAGIC);
+        w.f32(self.rate_hz);
+        w.count(self.channel_names.len());
+        for (name, scale) in self.channel_names.iter().zip(&self.channel_scales) {
+            w.name(name);
+            w.f32(*scale);
+        }
+        w.count(self.stages.len());
+        for (name, stage) in self.feature_names.iter().zip(&self.stages) {
+            w.name(name);
+            stage.write_image(&mut w);
+        }
+        self.slot_channels.iter().for_each(|&m| w.u32(m));
+        self.weights.iter().for_each(|&t| w.u32(t));
+        w.count(self.events.len());
+        for (name, e) in self.event_names.iter().zip(&self.events) {
+            w.name(name);
+            for terms in [&e.context, &e.sensor] {
+                w.count(terms.len());
+                for t in terms {
+                    w.u8(t.slot);
+                    t.cdf.write_image(&mut w);
+                    w.u16(t.weight);
+                    w.u32(t.channels);
+                }
+            }
+            for l in &e.levels {
+                w.u16(l.on);
+                w.u16(l.off);
+                w.u16(l.dwell);
+            }
+            w.u16(e.onset_level);
+        }
+        w.count(self.phases.len());
+        for (name, mask) in self.phase_names.iter().zip(&self.phases) {
+            w.name(name);
+            w.u8(*mask);
+        }
+        w.0
+    }
+
+    /// Replaces this detector with the one in `image` (made by [`Detector::to_image`]),
+    /// in place: the stack holds one event at a time, never a whole detector or
+    /// configuration. Every value is checked; on error the detector is left empty (see
+    /// [`Detector::empty`]) and the error names what was wrong.
+    pub fn load_image(&mut self, image: &[u8]) -> Result<(), ImageError> {
+        let result = self.read_image(&mut Reader::new(image));
+        if result.is_err() {
+            self.clear();
+        }
+        result
+    }
+
+    /// Empties every list and table in place.
+    fn clear(&mut self) {
+        self.rate_hz = 0.0;
+        self.channel_names.clear();
+        self.channel_scales.clear();
+        self.feature_names.clear();
+        self.event_names.clear();
+        self.phase_names.clear();
+        self.stages.clear();
+        self.slot_channels = [0; MAX_SLOTS];
+        self.weights = [0; STE_POOL];
+        self.events.clear();
+        self.phases.clear();
+    }
+
+    fn read_image(&mut self, r: &mut Reader<'_>) -> Result<(), ImageError> {
+        // Counts are checked against the capacities, so no push below can fail.
+        self.clear();
+        r.magic()?;
+        let rate = r.f32()?;
+        if !(rate.is_finite() && (10.0..=50_000.0).contains(&rate)) {
+            return Err(ImageError::Invalid("detector rate"));
+        }
+        self.rate_hz = rate;
+        for _ in 0..r.count(MAX_CHANNELS, "channel count")? {
+            let name = r.name()?;
+            let scale = r.f32()?;
+            if !(scale.is_finite() && scale > 0.0) {
+                return Err(ImageError::Invalid("channel scale"));
+            }
+            let _ = self.channel_names.push(name);
+            let _ = self.channel_scales.push(scale);
+        }
+        for k in 0..r.count(MAX_FEATURES, "feature count")? {
+            let _ = self.feature_names.push(r.name()?);
+            let _ = self.stages.push(Stage::read_image(r, MAX_CHANNELS + k)?);
+        }
+        for m in self.slot_channels.iter_mut() {
+            *m = r.u32()?;
+        }
+        for t in self.weights.iter_mut() {
+            *t = r.u32()?;
+        }
+        if !self.stages.iter().all(|s| taps_valid(s, &self.weights)) {
+            return Err(ImageError::Invalid("STE window taps"));
+        }
+        let events = r.count(MAX_EVENTS, "event count")?;
+        for _ in 0..events {
+            let _ = self.event_names.push(r.name()?);
+            let mut e = Event {
+                context: Vec::new(),
+                sensor: Vec::new(),
+                levels: [LevelParams {
+                    on: 0,
+                    off: 0,
+                    dwell: 0,
+                }; 2],
+                onset_level: 0,
+            };
+            for terms in [&mut e.context, &mut e.sensor] {
+                for _ in 0..r.count(MAX_TERMS, "term count")? {
+                    let slot = r.below(MAX_SLOTS, "term feature")?;
+                    let cdf = Cdf::read_image(r)?;
+                    let weight = r.u16()?;
+                    if weight > Confidence::ONE.to_bits() {
+                        return Err(ImageError::Invalid("term weight"));
+                    }
+                    let _ = terms.push(Term {
+                        slot,
+                        cdf,
+                        weight,
+                        channels: r.u32()?,
+                    });
+                }
+            }
+            if e.sensor.is_empty() {
+                return Err(ImageError::Invalid("sensor term count"));
+            }
+            for l in e.levels.iter_mut() {
+                *l = LevelParams {
+                    on: r.u16()?,
+                    off: r.u16()?,
+                    dwell: r.u16()?,
+                };
+                if l.on == 0 || l.on > Confidence::ONE.to_bits() || l.off > l.on || l.dwell == 0 {
+                    return Err(ImageError::Invalid("decision level"));
+                }
+            }
+            e.onset_level = r.u16()?;
+            if e.onset_level >= e.levels[0].on {
+                return Err(ImageError::Invalid("onset level"));
+            }
+            let _ = self.events.push(e);
+        }
+        for _ in 0..r.count(MAX_PHASES, "phase count")? {
+            let _ = self.phase_names.push(r.name()?);
+            let mask = r.u8()?;
+            if u32::from(mask) >> events != 0 {
+                return Err(ImageError::Invalid("phase events"));
+            }
+            let _ = self.phases.push(mask);
+        }
+        if self.channel_names.is_empty() || self.events.is_empty() || self.phases.is_empty() {
+            return Err(ImageError::Invalid("detector (empty)"));
+        }
+        r.finish()
     }
 
     /// A fresh state: features empty, first phase active, no level up.

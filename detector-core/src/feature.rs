@@ -7,6 +7,9 @@
 //! saturating at the [`Signal`](crate::Signal) range, with no division.
 
 use crate::MAX_STE_WINDOW;
+#[cfg(feature = "std")]
+use crate::image::Writer;
+use crate::image::{ImageError, Reader};
 
 /// A window shape for the short-time energy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -406,7 +409,9 @@ impl Stage {
                     // Exact: what enters now leaves N ticks later. sum ≤ N · 2^38 and
                     // recip ≤ 2^24 / N keep the product below 2^63.
                     st.acc += sq as i64 - oldest as i64;
-                    let sum = st.acc.max(0) as u64;
+                    // The clamp only matters for a detector loaded from a corrupt image
+                    // whose windows overlap: it keeps the product in range.
+                    let sum = (st.acc.max(0) as u64).min(u64::from(len) << 38);
                     ((sum * u64::from(recip)) >> 24).min(i32::MAX as u64) as i32
                 }
             }
@@ -416,6 +421,132 @@ impl Stage {
 
 /// STE inputs saturate here before squaring: 2048 in raw 16.16 bits.
 const STE_INPUT_LIMIT: i64 = 2048 << 16;
+
+impl Stage {
+    /// Appends this stage to a detector image.
+    #[cfg(feature = "std")]
+    pub(crate) fn write_image(&self, w: &mut Writer) {
+        match *self {
+            Stage::Raw(i) => {
+                w.u8(0);
+                w.u8(i);
+            }
+            Stage::Abs(i) => {
+                w.u8(1);
+                w.u8(i);
+            }
+            Stage::LowPass { input, alpha } => {
+                w.u8(2);
+                w.u8(input);
+                w.u32(alpha);
+            }
+            Stage::Rate { input, rate } => {
+                w.u8(3);
+                w.u8(input);
+                w.u32(rate);
+            }
+            Stage::Difference(a, b) => {
+                w.u8(4);
+                w.u8(a);
+                w.u8(b);
+            }
+            Stage::Dot(s) => {
+                w.u8(5);
+                s.iter().for_each(|&i| w.u8(i));
+            }
+            Stage::Magnitude(x, y) => {
+                w.u8(6);
+                w.u8(x);
+                w.u8(y);
+            }
+            Stage::Ste {
+                input,
+                offset,
+                len,
+                recip,
+                tapered,
+            } => {
+                w.u8(7);
+                w.u8(input);
+                w.u16(offset);
+                w.u16(len);
+                w.u32(recip);
+                w.u8(u8::from(tapered));
+            }
+        }
+    }
+
+    /// Reads a stage from a detector image; inputs must be below `slots`.
+    pub(crate) fn read_image(r: &mut Reader<'_>, slots: usize) -> Result<Stage, ImageError> {
+        let slot = |r: &mut Reader<'_>| r.below(slots, "feature input");
+        Ok(match r.u8()? {
+            0 => Stage::Raw(slot(r)?),
+            1 => Stage::Abs(slot(r)?),
+            2 => {
+                let input = slot(r)?;
+                let alpha = r.u32()?;
+                if alpha == 0 || alpha >= 1 << 31 {
+                    return Err(ImageError::Invalid("low-pass coefficient"));
+                }
+                Stage::LowPass { input, alpha }
+            }
+            3 => {
+                let input = slot(r)?;
+                let rate = r.u32()?;
+                if rate >= 1 << 24 {
+                    return Err(ImageError::Invalid("rate"));
+                }
+                Stage::Rate { input, rate }
+            }
+            4 => Stage::Difference(slot(r)?, slot(r)?),
+            5 => Stage::Dot([slot(r)?, slot(r)?, slot(r)?, slot(r)?]),
+            6 => Stage::Magnitude(slot(r)?, slot(r)?),
+            7 => {
+                let input = slot(r)?;
+                let (offset, len) = (r.u16()?, r.u16()?);
+                let (recip, tapered) = (r.u32()?, r.u8()?);
+                let end = usize::from(offset) + usize::from(len);
+                // recip · N ≤ 2^24 (plus rounding) keeps the running sum's product in 64 bits.
+                let scaled = u64::from(recip) * u64::from(len);
+                if len == 0
+                    || usize::from(len) > MAX_STE_WINDOW
+                    || end > STE_POOL
+                    || scaled > (1 << 24) + u64::from(len)
+                    || tapered > 1
+                {
+                    return Err(ImageError::Invalid("STE window"));
+                }
+                Stage::Ste {
+                    input,
+                    offset,
+                    len,
+                    recip,
+                    tapered: tapered == 1,
+                }
+            }
+            _ => return Err(ImageError::Invalid("feature kind")),
+        })
+    }
+}
+
+/// Whether a stage's window taps in `weights` are what [`Stage::compile`] makes: a
+/// tapered window's sum exactly 2²⁴, which keeps its weighted sum in 64 bits.
+pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; STE_POOL]) -> bool {
+    match *stage {
+        Stage::Ste {
+            offset,
+            len,
+            tapered: true,
+            ..
+        } => {
+            let start = usize::from(offset);
+            weights
+                .get(start..start + usize::from(len))
+                .is_some_and(|taps| taps.iter().map(|&t| u64::from(t)).sum::<u64>() == 1 << 24)
+        }
+        _ => true,
+    }
+}
 
 /// Saturates to the `i32` range.
 #[inline]

@@ -8,6 +8,7 @@ pub mod cdf;
 pub mod config;
 pub mod detector;
 pub mod feature;
+pub mod image;
 pub mod num;
 
 pub use cdf::{Cdf, CdfError, CdfSpec};
@@ -21,6 +22,7 @@ pub use detector::{
     Decision, Detector, EventId, Inputs, Level, Output, PhaseId, State, TermConfidences,
 };
 pub use feature::{StageError, StageSpec, Window};
+pub use image::ImageError;
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 
 /// Most input channels a configuration may declare.

@@ -1,5 +1,6 @@
 //! The configuration checksum: CRC-32/ISO-HDLC (the CRC of zlib, Ethernet and PNG), so a
-//! PC tool can check the value in the status heartbeat with `zlib.crc32(postcard_bytes)`.
+//! PC tool can check the value in the status heartbeat with `zlib.crc32(image)` of the
+//! detector image that `Detector::to_image` makes.
 //!
 //! Shared, as source, by the lib and by `build.rs`, which computes it at build time.
 

@@ -549,7 +549,8 @@ mod tests {
 
     #[test]
     fn the_embedded_configuration_maps_every_channel() {
-        let d = boot::load_detector().unwrap();
+        let mut d = Box::new(Detector::empty());
+        boot::load_detector(&mut d).unwrap();
         let m = ChannelMap::resolve(&d);
         let fed = m
             .adc

@@ -1,0 +1,117 @@
+//! Detector images: what the PC makes the chip loads to the same detector, and a corrupt
+//! image is rejected with a reason, leaves the detector empty, and never panics.
+
+use detector_core::{Config, Detector, ImageError, Inputs, Signal};
+use proptest::prelude::*;
+
+fn approach() -> Detector {
+    Detector::build(&Config::from_toml(host_tests::APPROACH_TOML).expect("approach config"))
+        .expect("builds")
+}
+
+#[test]
+fn an_image_loads_back_to_the_same_detector() {
+    let d = approach();
+    let image = d.to_image();
+    let mut loaded = Detector::empty();
+    loaded.load_image(&image).expect("loads");
+    assert_eq!(loaded, d);
+    assert_eq!(loaded.to_image(), image);
+    // And it runs the same.
+    let (mut a, mut b) = (d.new_state(), loaded.new_state());
+    let mut inputs = Inputs::default();
+    for k in 0..200u32 {
+        inputs.samples[0] = Signal::from_f32(-0.01 * k as f32);
+        inputs.samples[3] = Signal::from_f32(if k > 100 { 400.0 } else { 0.0 });
+        inputs.samples[6] = Signal::from_f32(0.05);
+        assert_eq!(d.tick(&mut a, k, &inputs), loaded.tick(&mut b, k, &inputs));
+    }
+}
+
+#[test]
+fn every_truncation_and_trailing_byte_is_rejected() {
+    let image = approach().to_image();
+    let mut d = approach();
+    for n in 0..image.len() {
+        let e = d
+            .load_image(&image[..n])
+            .expect_err("truncated image accepted");
+        assert!(
+            matches!(e, ImageError::Truncated | ImageError::Magic),
+            "{n}: {e}"
+        );
+        assert_eq!(
+            d,
+            Detector::empty(),
+            "a rejected image left something behind"
+        );
+    }
+    let mut longer = image.clone();
+    longer.push(0);
+    assert_eq!(d.load_image(&longer), Err(ImageError::TrailingBytes));
+    let mut old = image;
+    old[3] = b'0';
+    assert_eq!(d.load_image(&old), Err(ImageError::Magic));
+}
+
+#[test]
+fn out_of_range_values_are_named() {
+    let image = approach().to_image();
+    let mut bad_rate = image.clone();
+    bad_rate[4..8].copy_from_slice(&f32::NAN.to_le_bytes());
+    let mut d = Detector::empty();
+    assert_eq!(
+        d.load_image(&bad_rate),
+        Err(ImageError::Invalid("detector rate"))
+    );
+    let mut many_channels = image;
+    many_channels[8] = 200;
+    assert_eq!(
+        d.load_image(&many_channels),
+        Err(ImageError::Invalid("channel count"))
+    );
+    assert_eq!(
+        ImageError::Invalid("detector rate").to_string(),
+        "the image's detector rate is out of range"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 4096, ..ProptestConfig::default() })]
+
+    /// Any corruption of a real image (a few bytes overwritten) either loads a detector
+    /// that then ticks without panicking, or is rejected leaving the detector empty.
+    #[test]
+    fn corrupt_images_never_panic(edits in prop::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6),
+                                  samples in prop::collection::vec(any::<i32>(), 16)) {
+        let mut image = approach().to_image();
+        for (at, byte) in edits {
+            let i = at.index(image.len());
+            image[i] = byte;
+        }
+        let mut d = Detector::empty();
+        match d.load_image(&image) {
+            Ok(()) => {
+                let mut state = d.new_state();
+                let mut inputs = Inputs::default();
+                for (s, v) in inputs.samples.iter_mut().zip(&samples) {
+                    *s = Signal::from_bits(*v);
+                }
+                for k in 0..8 {
+                    let out = d.tick(&mut state, k, &inputs);
+                    prop_assert!(out.confidences.iter().all(|c| c.to_bits() <= 32768));
+                }
+            }
+            Err(_) => prop_assert_eq!(&d, &Detector::empty()),
+        }
+    }
+
+    /// Arbitrary bytes after a valid magic are rejected or load, never panic.
+    #[test]
+    fn arbitrary_images_never_panic(tail in prop::collection::vec(any::<u8>(), 0..600)) {
+        let mut image = b"FTD1".to_vec();
+        image.extend(tail);
+        let mut d = Detector::empty();
+        let _ = d.load_image(&image);
+    }
+}
