@@ -9,14 +9,12 @@ use heapless::Vec;
 
 use crate::cdf::Cdf;
 use crate::config::{Config, ConfigError, Item, LevelSpec, Name, Problem};
-use crate::feature::{STE_POOL, Stage, StageState, taps_valid};
+use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState, taps_valid};
 use crate::image::{ImageError, Reader};
 #[cfg(feature = "std")]
 use crate::image::{MAGIC, Writer};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::{MAX_CHANNELS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS};
-
-const MAX_SLOTS: usize = MAX_CHANNELS + MAX_FEATURES;
 
 /// The index of an event in its configuration, `0..MAX_EVENTS`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -955,5 +953,3 @@ fn eval(t: &Term, values: &[i32; MAX_SLOTS]) -> u16 {
     let x = values[usize::from(t.slot) & (MAX_SLOTS - 1)];
     t.cdf.eval(Signal::from_bits(x)).to_bits()
 }
-
-const _: () = assert!(MAX_SLOTS.is_power_of_two());

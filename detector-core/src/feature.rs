@@ -195,6 +195,12 @@ impl core::fmt::Display for StageError {
     }
 }
 
+/// Slots a stage can read: the channels, then the features.
+pub(crate) const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
+
+// Slot reads mask the index with MAX_SLOTS - 1: one instruction, no bounds check.
+const _: () = assert!(MAX_SLOTS.is_power_of_two());
+
 /// Samples of STE history the detector holds for all its STE features together.
 pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
 
@@ -317,14 +323,13 @@ impl Stage {
     pub(crate) fn update(
         &self,
         st: &mut StageState,
-        values: &[i32],
+        values: &[i32; MAX_SLOTS],
         ring: &mut [u64; STE_POOL],
         weights: &[u32; STE_POOL],
     ) -> i32 {
-        // Slots are validated below the slot count, a power of two: masking keeps every
-        // access in bounds for one instruction.
-        let mask = values.len().next_power_of_two() - 1;
-        let get = |slot: u8| values.get(usize::from(slot) & mask).copied().unwrap_or(0);
+        // Slots are validated below MAX_SLOTS, a power of two: masking keeps every access
+        // in bounds for one instruction.
+        let get = |slot: u8| values[usize::from(slot) & (MAX_SLOTS - 1)];
         match *self {
             Stage::Raw(i) => get(i),
             Stage::Abs(i) => get(i).saturating_abs(),
@@ -618,10 +623,10 @@ mod tests {
         let mut ring = [0u64; STE_POOL];
         (0..inputs[0].len())
             .map(|k| {
-                let values: Vec<i32> = inputs
-                    .iter()
-                    .map(|c| Signal::from_f64(c[k]).to_bits())
-                    .collect();
+                let mut values = [0i32; MAX_SLOTS];
+                for (v, c) in values.iter_mut().zip(inputs) {
+                    *v = Signal::from_f64(c[k]).to_bits();
+                }
                 Signal::from_bits(stage.update(&mut st, &values, &mut ring, &weights)).to_f64()
             })
             .collect()
