@@ -1,4 +1,4 @@
-//! A built detector as bytes: made on the PC ([`crate::Detector::to_image`], `std`), loaded
+//! A built detector as bytes: made on the PC (`Detector::to_image`, `std`), loaded
 //! on the chip in place ([`crate::Detector::load_image`]) with a small stack frame, no
 //! serde and no configuration parsing. The firmware embeds the image of
 //! `configs/approach.toml` that its build script made, so the chip never holds a
