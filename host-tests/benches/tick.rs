@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 
 use detector_core::{Config, Detector, Inputs, Tick};
 use host_tests::reference::Model;
-use host_tests::sim::{Scenario, SimOptions, simulate};
+use host_tests::replay::channel_columns;
+use host_tests::sim::golden_runs;
 
 /// Timed passes over the trace per model, after one warm-up pass.
 const PASSES: usize = 21;
@@ -34,21 +35,9 @@ fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
     let detector = Detector::build(&config).map_err(|e| e.to_string())?;
     let model = Model::new(&config).map_err(|e| e.to_string())?;
     let mut segments = Vec::new();
-    for scenario in Scenario::table1().iter().chain([&Scenario::FreeMotion]) {
-        let opts = SimOptions {
-            rate_hz: f64::from(config.rate_hz),
-            duration_s: (*scenario == Scenario::FreeMotion).then_some(1.0),
-            ..SimOptions::default()
-        };
-        let t = simulate(scenario, &opts).map_err(|e| format!("{}: {e}", scenario.name()))?;
-        let columns = detector
-            .channels()
-            .iter()
-            .map(|n| {
-                t.column(n)
-                    .ok_or_else(|| format!("{}: no column {n}", scenario.name()))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+    let runs = golden_runs(f64::from(config.rate_hz)).map_err(|e| e.to_string())?;
+    for (_, t) in &runs {
+        let columns = channel_columns(&detector, t).map_err(|e| e.to_string())?;
         let si = |k: usize, row: usize| columns.get(k).and_then(|c| c.get(row)).copied();
         let ticks = (0..t.len())
             .map(|row| {

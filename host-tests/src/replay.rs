@@ -69,6 +69,26 @@ pub enum ReplayError {
     },
 }
 
+/// The trace's column for each of the detector's channels, in sample order.
+pub fn channel_columns<'t>(
+    detector: &Detector,
+    trace: &'t Trace,
+) -> Result<Vec<&'t [f64]>, ReplayError> {
+    detector
+        .channels()
+        .iter()
+        .map(|channel| {
+            trace
+                .column(channel)
+                .ok_or_else(|| ReplayError::MissingChannel {
+                    trace: trace.name().to_string(),
+                    channel: channel.to_string(),
+                    have: trace.channel_names().join(", "),
+                })
+        })
+        .collect()
+}
+
 /// Replays `trace` through `detector`, calling `each_tick(row, &state, &output)` after every
 /// tick,
 /// and returns every level raised. The trace is checked first (channels, rate, phases);
@@ -79,19 +99,7 @@ pub fn replay(
     mut each_tick: impl FnMut(usize, &State, &Output),
 ) -> Result<Vec<DecisionRecord>, ReplayError> {
     let name = trace.name().to_string();
-    let mut columns = Vec::new();
-    for channel in detector.channels() {
-        match trace.column(channel) {
-            Some(c) => columns.push(c),
-            None => {
-                return Err(ReplayError::MissingChannel {
-                    trace: name,
-                    channel: channel.to_string(),
-                    have: trace.channel_names().join(", "),
-                });
-            }
-        }
-    }
+    let columns = channel_columns(detector, trace)?;
     let config_hz = detector.rate_hz();
     if (trace.rate_hz() - f64::from(config_hz)).abs() > 0.01 * f64::from(config_hz) {
         return Err(ReplayError::RateMismatch {

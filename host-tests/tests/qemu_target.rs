@@ -39,7 +39,8 @@ use std::time::{Duration, Instant};
 use detector_core::{Config, Detector};
 use fingertip_qemu::replay::{SegmentLine, plain_tick, replay, staged_tick};
 use fingertip_qemu::trace::{Encoder, Trace};
-use host_tests::sim::{Scenario, SimOptions, simulate};
+use host_tests::replay::channel_columns;
+use host_tests::sim::golden_runs;
 
 /// Most instructions one tick may take (issue 6). Not met yet: the approach
 /// configuration's worst tick is about 2,370; see docs/performance.md.
@@ -141,20 +142,8 @@ fn golden_trace() -> Result<Vec<u8>, String> {
         return Err("the synthetic trace does not have the configuration's channels".into());
     }
     let mut runs = Vec::new();
-    for scenario in Scenario::table1().iter().chain([&Scenario::FreeMotion]) {
-        let opts = SimOptions {
-            rate_hz: f64::from(config.rate_hz),
-            duration_s: (*scenario == Scenario::FreeMotion).then_some(1.0),
-            ..SimOptions::default()
-        };
-        let t = simulate(scenario, &opts).map_err(|e| format!("{}: {e}", scenario.name()))?;
-        let columns = names
-            .iter()
-            .map(|n| {
-                t.column(n)
-                    .ok_or_else(|| format!("{}: no column {n}", scenario.name()))
-            })
-            .collect::<Result<Vec<_>, _>>()?;
+    for (scenario, t) in golden_runs(f64::from(config.rate_hz)).map_err(|e| e.to_string())? {
+        let columns = channel_columns(&detector, &t).map_err(|e| e.to_string())?;
         let records: Vec<(u32, Vec<i32>)> = (0..t.len())
             .map(|row| {
                 let samples = columns

@@ -441,6 +441,23 @@ fn stream_seed(seed: u64, scenario: &str, stream: u64) -> u64 {
     mix(mix(seed ^ h).wrapping_add(stream.wrapping_mul(0x9e37_79b9_7f4a_7c15)))
 }
 
+/// The golden runs that the bit-exactness check on the Cortex-M4 and the tick benchmark
+/// share: every nominal Table 1 run, then one second of free motion, at `rate_hz`.
+pub fn golden_runs(rate_hz: f64) -> Result<Vec<(Scenario, Trace)>, SimError> {
+    Scenario::table1()
+        .iter()
+        .chain([&Scenario::FreeMotion])
+        .map(|scenario| {
+            let opts = SimOptions {
+                rate_hz,
+                duration_s: (*scenario == Scenario::FreeMotion).then_some(1.0),
+                ..SimOptions::default()
+            };
+            simulate(scenario, &opts).map(|t| (*scenario, t))
+        })
+        .collect()
+}
+
 /// Runs one scenario and returns its trace.
 ///
 /// The trace has the columns `t`, the ten [`CHANNELS`], `phase` and `truth`, and metadata
