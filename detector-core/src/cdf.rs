@@ -123,19 +123,21 @@ impl core::fmt::Display for CdfError {
 
 /// A linear map from `[start, start + span]` onto `[0, 1]` in Q15, clamped at both ends.
 ///
-/// `t = ((x - start) << up >> down) · mul >> 32`, with `up − down = 16 − ⌊log₂ span⌋` and
-/// `mul = 2^(31 + ⌊log₂ span⌋) / span` chosen at build time: the shifted distance stays
-/// below 2¹⁷ and `mul` within (2³⁰, 2³¹], so the product is one 32×32→64 multiplication
-/// whose high word is the answer. Dropping up to 15 low bits of a wide ramp's distance
-/// costs less than a quarter of a Q15 step.
+/// `t = (d << pre) · mul >> 32` for a distance `d = x − start` below `span`, rounded to
+/// nearest: one 32×32→64 multiplication whose high word is the answer. A narrow ramp
+/// (`span` < 2¹⁷ raw) shifts the distance up by `pre` = 15, which keeps it below 2³², and
+/// uses `mul = 2³² / span`; a wide one takes the distance as it is with `mul = 2⁴⁷ / span`
+/// (at most 2³⁰). Rounding `mul` moves `t` by less than half a Q15 step.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Ramp {
     start: i32,
     span: u32,
     mul: u32,
-    up: u8,
-    down: u8,
+    pre: u8,
 }
+
+/// Spans below this are narrow (see [`Ramp`]).
+const NARROW: u64 = 1 << 17;
 
 impl Ramp {
     /// `start < end` in raw 16.16 bits; `None` if they are equal or reversed.
@@ -145,14 +147,14 @@ impl Ramp {
             return None;
         }
         let span = span as u64; // 1..=2^32-1
-        let log2 = 63 - span.leading_zeros(); // floor(log2 span), 0..=31
-        let mul = ((1u64 << (31 + log2)) + span / 2) / span;
+        let (pre, scale) = if span < NARROW { (15, 32) } else { (0, 47) };
+        let mul = ((1u64 << scale) + span / 2) / span;
         Some(Ramp {
             start,
             span: span as u32,
+            // Only a one-unit span reaches 2^32; its only distance below the span is 0.
             mul: mul.min(u32::MAX as u64) as u32,
-            up: 16u32.saturating_sub(log2) as u8,
-            down: log2.saturating_sub(16) as u8,
+            pre,
         })
     }
 
@@ -162,8 +164,7 @@ impl Ramp {
         if d >= self.span {
             return 1 << 15;
         }
-        let d = (d << self.up) >> self.down;
-        // Rounded to nearest: with the dropped low bits, within ¾ of a Q15 step.
+        let d = d << self.pre;
         let t = ((d as u64 * self.mul as u64 + (1 << 31)) >> 32) as u32;
         t.min(1 << 15)
     }
@@ -343,8 +344,7 @@ impl Ramp {
         w.i32(self.start);
         w.u32(self.span);
         w.u32(self.mul);
-        w.u8(self.up);
-        w.u8(self.down);
+        w.u8(self.pre);
     }
 
     fn read_image(r: &mut Reader<'_>) -> Result<Ramp, ImageError> {
@@ -352,11 +352,11 @@ impl Ramp {
             start: r.i32()?,
             span: r.u32()?,
             mul: r.u32()?,
-            up: r.u8()?,
-            down: r.u8()?,
+            pre: r.u8()?,
         };
-        // What `Ramp::new` can produce: shifts keep the distance below 2^17.
-        if ramp.span == 0 || ramp.up > 16 || ramp.down > 15 || (ramp.up > 0 && ramp.down > 0) {
+        // What `Ramp::new` can produce: a shifted distance stays below 2^32.
+        let narrow = u64::from(ramp.span) < NARROW;
+        if ramp.span == 0 || ramp.pre != if narrow { 15 } else { 0 } {
             return Err(ImageError::Invalid("CDF ramp"));
         }
         Ok(ramp)

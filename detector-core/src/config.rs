@@ -228,6 +228,9 @@ pub enum Problem {
     Dwell(f32),
     /// A channel's scale is not a positive, finite number.
     Scale(f32),
+    /// The term would be one distinct (feature, CDF) pair more than the detector holds
+    /// (the limit given).
+    DistinctTerms(usize),
 }
 
 impl core::fmt::Display for Problem {
@@ -250,6 +253,10 @@ impl core::fmt::Display for Problem {
             Problem::WeightSum(s) => write!(f, "sensor weights sum to {s:.3}, above 1"),
             Problem::Level { param, value, rule } => write!(f, "{param} = {value} {rule}"),
             Problem::Scale(k) => write!(f, "scale = {k} must be a positive, finite number"),
+            Problem::DistinctTerms(n) => write!(
+                f,
+                "the events' terms judge more than {n} distinct (feature, CDF) pairs"
+            ),
             Problem::Dwell(d) => write!(
                 f,
                 "dwell_ms = {d} must be a finite, non-negative time of at most 65535 ticks"

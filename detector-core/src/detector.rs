@@ -7,14 +7,16 @@
 
 use heapless::Vec;
 
-use crate::cdf::Cdf;
+use crate::cdf::{Cdf, CdfSpec};
 use crate::config::{Config, ConfigError, Item, LevelSpec, Name, Problem};
 use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState, taps_valid};
 use crate::image::{ImageError, Reader};
 #[cfg(feature = "std")]
 use crate::image::{MAGIC, Writer};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
-use crate::{MAX_CHANNELS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS};
+use crate::{
+    MAX_CHANNELS, MAX_DISTINCT_TERMS as MAX_PSI, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS,
+};
 
 /// The index of an event in its configuration, `0..MAX_EVENTS`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -111,13 +113,26 @@ pub struct Output {
     pub decisions: Vec<Decision, { 2 * MAX_EVENTS }>,
 }
 
+// Reads of `State::psi` mask the index with MAX_PSI - 1: one instruction, no bounds check.
+const _: () = assert!(MAX_PSI.is_power_of_two() && MAX_PSI <= 256);
+
+/// One feature judged by one CDF (the paper's ψ), evaluated once per tick however many
+/// terms of however many events name the same pair.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Term {
+struct Psi {
     slot: u8,
     cdf: Cdf,
-    /// Q15; 0 for context terms.
-    weight: u16,
+    /// The channels the feature reads: a fault on any of them makes ψ 0.
     channels: ChannelMask,
+    /// The events whose terms use it: it is evaluated when one of them is active.
+    events: EventMask,
+}
+
+/// A sensor term: which ψ, and its weight (Q15).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Weighted {
+    psi: u8,
+    weight: u16,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -129,8 +144,13 @@ struct LevelParams {
 
 #[derive(Clone, Debug, PartialEq, Eq)]
 struct Event {
-    context: Vec<Term, MAX_TERMS>,
-    sensor: Vec<Term, MAX_TERMS>,
+    /// Context terms, as indices into the detector's ψ table.
+    context: Vec<u8, MAX_TERMS>,
+    sensor: Vec<Weighted, MAX_TERMS>,
+    /// The channels the context terms read, together.
+    context_channels: ChannelMask,
+    /// The channels the sensor terms read, together.
+    sensor_channels: ChannelMask,
     levels: [LevelParams; 2],
     onset_level: u16,
 }
@@ -139,6 +159,27 @@ struct Event {
 struct LevelState {
     up: bool,
     run: u16,
+}
+
+impl LevelState {
+    /// One tick of a level at confidence `q` (Q15): up at `on` after `dwell` ticks in a
+    /// row, down below `off`. Returns whether the level was raised at this tick.
+    #[inline(always)]
+    fn step(&mut self, p: &LevelParams, q: u16) -> bool {
+        if self.up {
+            if q < p.off {
+                *self = LevelState::default();
+            }
+            false
+        } else if q >= p.on {
+            self.run = self.run.saturating_add(1);
+            self.up = self.run >= p.dwell;
+            self.up
+        } else {
+            self.run = 0;
+            false
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -156,8 +197,8 @@ pub struct State {
     values: [i32; MAX_SLOTS],
     stages: [StageState; MAX_FEATURES],
     ring: [u64; STE_POOL],
-    /// Per event, context term confidences then sensor term confidences (Q15).
-    psi: [[u16; 2 * MAX_TERMS]; MAX_EVENTS],
+    /// Each ψ's confidence at the last tick (Q15), by the detector's ψ index.
+    psi: [u16; MAX_PSI],
     events: [EventState; MAX_EVENTS],
     phase: u8,
 }
@@ -182,11 +223,10 @@ impl State {
         event: EventId,
     ) -> Option<(TermConfidences, TermConfidences)> {
         let e = detector.events.get(usize::from(event.0))?;
-        let psi = self.psi.get(usize::from(event.0))?;
-        let (ctx, sen) = psi.split_at(MAX_TERMS);
+        let psi = |k: u8| self.psi.get(usize::from(k)).copied().unwrap_or(0);
         Some((
-            TermConfidences(ctx.get(..e.context.len())?.try_into().ok()?),
-            TermConfidences(sen.get(..e.sensor.len())?.try_into().ok()?),
+            TermConfidences(e.context.iter().map(|&k| psi(k)).collect()),
+            TermConfidences(e.sensor.iter().map(|w| psi(w.psi)).collect()),
         ))
     }
 
@@ -222,6 +262,8 @@ pub struct Detector {
     /// Channel dependencies of each slot.
     slot_channels: [ChannelMask; MAX_SLOTS],
     weights: [u32; STE_POOL],
+    /// The distinct (feature, CDF) pairs of all events' terms.
+    psis: Vec<Psi, MAX_PSI>,
     events: Vec<Event, MAX_EVENTS>,
     phases: Vec<EventMask, MAX_PHASES>,
 }
@@ -385,42 +427,61 @@ impl Detector {
                 None => err(item, Problem::UnknownFeature(feature.clone())),
             }
         };
+        let mut psis: Vec<Psi, MAX_PSI> = Vec::new();
+        // The index of the ψ for (feature, CDF), added if new; `bit` is the event using it.
+        let mut psi_index = |feature: &Name, spec: &CdfSpec, item: Item, bit: EventMask| {
+            let slot = feature_slot(feature, item.clone())?;
+            let cdf = Cdf::new(spec).or_else(|c| err(item.clone(), Problem::Cdf(c)))?;
+            let k = match psis.iter().position(|p| p.slot == slot && p.cdf == cdf) {
+                Some(k) => k,
+                None => {
+                    let psi = Psi {
+                        slot,
+                        cdf,
+                        channels: slot_channels.get(usize::from(slot)).copied().unwrap_or(0),
+                        events: 0,
+                    };
+                    if psis.push(psi).is_err() {
+                        return err(item, Problem::DistinctTerms(MAX_PSI));
+                    }
+                    psis.len() - 1
+                }
+            };
+            if let Some(p) = psis.get_mut(k) {
+                p.events |= bit;
+            }
+            Ok::<_, ConfigError>((k as u8, psis.get(k).map_or(0, |p| p.channels)))
+        };
         let mut events = Vec::new();
-        for e in &config.events {
+        for (i, e) in config.events.iter().enumerate() {
             if e.sensor.is_empty() {
                 return err(Item::Event(e.name.clone()), Problem::Empty("sensor term"));
             }
+            let bit: EventMask = 1 << i;
             let mut context = Vec::new();
+            let mut context_channels = 0;
             for t in &e.context {
-                let item = || Item::ContextTerm(e.name.clone(), t.feature.clone());
-                let slot = feature_slot(&t.feature, item())?;
-                let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
-                let channels = slot_channels.get(usize::from(slot)).copied().unwrap_or(0);
-                let _ = context.push(Term {
-                    slot,
-                    cdf,
-                    weight: 0,
-                    channels,
-                });
+                let item = Item::ContextTerm(e.name.clone(), t.feature.clone());
+                let (k, channels) = psi_index(&t.feature, &t.cdf, item, bit)?;
+                context_channels |= channels;
+                let _ = context.push(k);
             }
             let mut sensor = Vec::new();
+            let mut sensor_channels = 0;
             let mut total = 0.0f32;
             let mut total_q15 = 0u32;
             for t in &e.sensor {
-                let item = || Item::SensorTerm(e.name.clone(), t.feature.clone());
-                let slot = feature_slot(&t.feature, item())?;
-                let cdf = Cdf::new(&t.cdf).or_else(|c| err(item(), Problem::Cdf(c)))?;
+                let item = Item::SensorTerm(e.name.clone(), t.feature.clone());
                 let Some(weight) = Confidence::from_f32(t.weight) else {
-                    return err(item(), Problem::Weight(t.weight));
+                    return err(item, Problem::Weight(t.weight));
                 };
+                let (k, channels) = psi_index(&t.feature, &t.cdf, item, bit)?;
+                sensor_channels |= channels;
                 total += t.weight;
                 total_q15 += u32::from(weight.to_bits());
-                let channels = slot_channels.get(usize::from(slot)).copied().unwrap_or(0);
-                let _ = sensor.push(Term {
-                    slot,
-                    cdf,
+                let _ = sensor.push(Weighted {
+                    psi: k,
                     weight: weight.to_bits(),
-                    channels,
                 });
             }
             // A little float slack so that weights like 0.1 + 0.2 + 0.7 pass; the
@@ -460,6 +521,8 @@ impl Detector {
             let _ = events.push(Event {
                 context,
                 sensor,
+                context_channels,
+                sensor_channels,
                 levels: [alert, confirm],
                 onset_level,
             });
@@ -496,6 +559,7 @@ impl Detector {
             stages,
             slot_channels,
             weights,
+            psis,
             events,
             phases,
         })
@@ -515,6 +579,7 @@ impl Detector {
             stages: Vec::new(),
             slot_channels: [0; MAX_SLOTS],
             weights: [0; STE_POOL],
+            psis: Vec::new(),
             events: Vec::new(),
             phases: Vec::new(),
         }
@@ -538,17 +603,20 @@ impl Detector {
         }
         self.slot_channels.iter().for_each(|&m| w.u32(m));
         self.weights.iter().for_each(|&t| w.u32(t));
+        w.count(self.psis.len());
+        for p in &self.psis {
+            w.u8(p.slot);
+            p.cdf.write_image(&mut w);
+        }
         w.count(self.events.len());
         for (name, e) in self.event_names.iter().zip(&self.events) {
             w.name(name);
-            for terms in [&e.context, &e.sensor] {
-                w.count(terms.len());
-                for t in terms {
-                    w.u8(t.slot);
-                    t.cdf.write_image(&mut w);
-                    w.u16(t.weight);
-                    w.u32(t.channels);
-                }
+            w.count(e.context.len());
+            e.context.iter().for_each(|&k| w.u8(k));
+            w.count(e.sensor.len());
+            for t in &e.sensor {
+                w.u8(t.psi);
+                w.u16(t.weight);
             }
             for l in &e.levels {
                 w.u16(l.on);
@@ -588,6 +656,7 @@ impl Detector {
         self.stages.clear();
         self.slot_channels = [0; MAX_SLOTS];
         self.weights = [0; STE_POOL];
+        self.psis.clear();
         self.events.clear();
         self.phases.clear();
     }
@@ -623,12 +692,29 @@ impl Detector {
         if !self.stages.iter().all(|s| taps_valid(s, &self.weights)) {
             return Err(ImageError::Invalid("STE window taps"));
         }
+        for _ in 0..r.count(MAX_PSI, "CDF count")? {
+            let slot = r.below(MAX_SLOTS, "term feature")?;
+            let cdf = Cdf::read_image(r)?;
+            let channels = self
+                .slot_channels
+                .get(usize::from(slot))
+                .copied()
+                .unwrap_or(0);
+            let _ = self.psis.push(Psi {
+                slot,
+                cdf,
+                channels,
+                events: 0,
+            });
+        }
         let events = r.count(MAX_EVENTS, "event count")?;
-        for _ in 0..events {
+        for i in 0..events {
             let _ = self.event_names.push(r.name()?);
             let mut e = Event {
                 context: Vec::new(),
                 sensor: Vec::new(),
+                context_channels: 0,
+                sensor_channels: 0,
                 levels: [LevelParams {
                     on: 0,
                     off: 0,
@@ -636,21 +722,31 @@ impl Detector {
                 }; 2],
                 onset_level: 0,
             };
-            for terms in [&mut e.context, &mut e.sensor] {
-                for _ in 0..r.count(MAX_TERMS, "term count")? {
-                    let slot = r.below(MAX_SLOTS, "term feature")?;
-                    let cdf = Cdf::read_image(r)?;
-                    let weight = r.u16()?;
-                    if weight > Confidence::ONE.to_bits() {
-                        return Err(ImageError::Invalid("term weight"));
-                    }
-                    let _ = terms.push(Term {
-                        slot,
-                        cdf,
-                        weight,
-                        channels: r.u32()?,
-                    });
+            let psis = self.psis.len();
+            // Marks ψ `k` as used by this event and gives its channels.
+            let mut use_psi = |k: u8| {
+                let p = self.psis.get_mut(usize::from(k));
+                p.map_or(0, |p| {
+                    p.events |= 1 << i;
+                    p.channels
+                })
+            };
+            for _ in 0..r.count(MAX_TERMS, "context term count")? {
+                let k = r.below(psis, "context term CDF")?;
+                e.context_channels |= use_psi(k);
+                let _ = e.context.push(k);
+            }
+            let mut total = 0u32;
+            for _ in 0..r.count(MAX_TERMS, "sensor term count")? {
+                let k = r.below(psis, "sensor term CDF")?;
+                let weight = r.u16()?;
+                total += u32::from(weight);
+                // Build allows the quantized weights two units of rounding above one.
+                if total > u32::from(Confidence::ONE.to_bits()) + 2 {
+                    return Err(ImageError::Invalid("term weights"));
                 }
+                e.sensor_channels |= use_psi(k);
+                let _ = e.sensor.push(Weighted { psi: k, weight });
             }
             if e.sensor.is_empty() {
                 return Err(ImageError::Invalid("sensor term count"));
@@ -691,7 +787,7 @@ impl Detector {
             values: [0; MAX_SLOTS],
             stages: [StageState::default(); MAX_FEATURES],
             ring: [0; STE_POOL],
-            psi: [[0; 2 * MAX_TERMS]; MAX_EVENTS],
+            psi: [0; MAX_PSI],
             events: [EventState::default(); MAX_EVENTS],
             phase: 0,
         }
@@ -768,12 +864,9 @@ impl Detector {
 
     /// The channels an event's features read (context and sensor terms together).
     pub fn event_channels(&self, event: EventId) -> ChannelMask {
-        self.events.get(usize::from(event.0)).map_or(0, |e| {
-            e.context
-                .iter()
-                .chain(&e.sensor)
-                .fold(0, |m, t| m | t.channels)
-        })
+        self.events
+            .get(usize::from(event.0))
+            .map_or(0, |e| e.context_channels | e.sensor_channels)
     }
 
     /// Switches phase. Switching to another phase lowers every level and forgets onsets;
@@ -817,84 +910,95 @@ impl Detector {
         }
         for (k, (stage, st)) in self.stages.iter().zip(state.stages.iter_mut()).enumerate() {
             let y = stage.update(st, &state.values, &mut state.ring, &self.weights);
-            if let Some(v) = state.values.get_mut(MAX_CHANNELS + k) {
-                *v = y;
-            }
+            // k < MAX_FEATURES, so the slot is below MAX_SLOTS (a power of two) and the mask
+            // only spares a bounds check.
+            state.values[(MAX_CHANNELS + k) & (MAX_SLOTS - 1)] = y;
         }
     }
 
     /// Stage 2: the confidence of every term of the active phase's events; terms reading a
-    /// faulty channel get 0. Sets `evaluated`, `unjudgeable` and `degraded` in `out`.
+    /// faulty channel get 0. Terms of different events that judge the same feature with
+    /// the same CDF are evaluated once. Sets `evaluated`, `unjudgeable` and `degraded` in
+    /// `out`.
     pub fn term_confidences(&self, state: &mut State, faults: ChannelMask, out: &mut Output) {
         let active = self.phase_events(PhaseId(state.phase));
         out.evaluated = active;
-        for (i, (e, psi)) in self.events.iter().zip(state.psi.iter_mut()).enumerate() {
-            let bit: EventMask = 1 << i;
-            if active & bit == 0 {
+        for (p, c) in self.psis.iter().zip(state.psi.iter_mut()) {
+            if p.events & active == 0 {
                 continue;
             }
-            let (ctx, sen) = psi.split_at_mut(MAX_TERMS);
-            let mut sensor_ok = false;
-            for (t, p) in e.context.iter().zip(ctx.iter_mut()) {
-                if t.channels & faults != 0 {
-                    *p = 0;
-                    out.unjudgeable |= bit;
-                } else {
-                    *p = eval(t, &state.values);
-                }
+            *c = if p.channels & faults != 0 {
+                0
+            } else {
+                // Slots are validated below MAX_SLOTS, a power of two: the mask costs one
+                // instruction and leaves no out-of-bounds path.
+                let x = state.values[usize::from(p.slot) & (MAX_SLOTS - 1)];
+                p.cdf.eval(Signal::from_bits(x)).to_bits()
+            };
+        }
+        if faults == 0 {
+            return;
+        }
+        for (i, e) in self.events.iter().enumerate() {
+            let bit: EventMask = 1 << i;
+            if active & bit == 0 || (e.context_channels | e.sensor_channels) & faults == 0 {
+                continue;
             }
-            for (t, p) in e.sensor.iter().zip(sen.iter_mut()) {
-                if t.channels & faults != 0 {
-                    *p = 0;
-                    out.degraded |= bit;
-                } else {
-                    *p = eval(t, &state.values);
-                    sensor_ok = true;
-                }
-            }
-            if !sensor_ok {
+            let faulty = |k: u8| {
+                self.psis
+                    .get(usize::from(k))
+                    .is_none_or(|p| p.channels & faults != 0)
+            };
+            if e.context_channels & faults != 0 || e.sensor.iter().all(|t| faulty(t.psi)) {
                 out.unjudgeable |= bit;
+            } else if e.sensor_channels & faults != 0 {
+                out.degraded |= bit;
             }
         }
-        out.degraded &= !out.unjudgeable;
     }
 
     /// Stage 3: eq. 14 for every judgeable event of the active phase, from the term
-    /// confidences: Π context × min(1, Σ weight × sensor), rounded to nearest in Q15.
+    /// confidences: Π context × min(1, Σ weight × sensor), each product rounded to nearest
+    /// in Q15.
     pub fn combine(&self, state: &State, out: &mut Output) {
+        // ψ indices are validated below MAX_PSI, a power of two: masked reads stay in bounds.
+        let psi = |k: u8| u32::from(state.psi[usize::from(k) & (MAX_PSI - 1)]);
         let judged = out.evaluated & !out.unjudgeable;
-        for (i, ((e, psi), c)) in self
+        for (i, (e, c)) in self
             .events
             .iter()
-            .zip(state.psi.iter())
             .zip(out.confidences.iter_mut())
             .enumerate()
         {
             if judged & (1 << i) == 0 {
                 continue;
             }
-            let (ctx, sen) = psi.split_at(MAX_TERMS);
-            let product = ctx
+            // Every factor is at most 2^15, so no product exceeds 2^15 after rounding.
+            let product = e
+                .context
                 .iter()
-                .take(e.context.len())
-                .fold(Confidence::ONE, |acc, &p| {
-                    acc.mul(Confidence::from_bits_clamped(u32::from(p)))
-                });
+                .fold(1 << 15, |acc, &k| (acc * psi(k) + (1 << 14)) >> 15);
+            // Weights sum to at most 2^15 + 2, so the sum stays below 2^31.
             let sum: u32 = e
                 .sensor
                 .iter()
-                .zip(sen)
-                .map(|(t, &p)| u32::from(t.weight) * u32::from(p))
+                .map(|t| u32::from(t.weight) * psi(t.psi))
                 .sum();
-            let sum = Confidence::from_bits_clamped((sum + (1 << 14)) >> 15);
-            *c = product.mul(sum);
+            let sum = ((sum + (1 << 14)) >> 15).min(1 << 15);
+            *c = Confidence::from_bits_clamped((product * sum + (1 << 14)) >> 15);
         }
     }
 
     /// Stage 4: decision levels with hysteresis and dwell, and onset tracking, for the
     /// active phase's events. An unjudgeable event has every level lowered.
     pub fn decide(&self, state: &mut State, now: Tick, out: &mut Output) {
-        for (i, (e, st)) in self.events.iter().zip(state.events.iter_mut()).enumerate() {
+        for (i, ((e, st), &c)) in self
+            .events
+            .iter()
+            .zip(state.events.iter_mut())
+            .zip(out.confidences.iter())
+            .enumerate()
+        {
             let bit: EventMask = 1 << i;
             if out.evaluated & bit == 0 {
                 continue;
@@ -903,53 +1007,32 @@ impl Detector {
                 *st = EventState::default();
                 continue;
             }
-            let c = out.confidences.get(i).copied().unwrap_or_default();
-            if c.to_bits() > e.onset_level {
-                if !st.rising {
-                    st.rising = true;
-                    st.onset = now;
-                }
-            } else {
+            let q = c.to_bits();
+            if q <= e.onset_level {
                 st.rising = false;
+            } else if !st.rising {
+                st.rising = true;
+                st.onset = now;
             }
-            for (k, (p, ls)) in e.levels.iter().zip(st.levels.iter_mut()).enumerate() {
-                let level = if k == 0 { Level::Alert } else { Level::Confirm };
-                if ls.up {
-                    if c.to_bits() < p.off {
-                        *ls = LevelState::default();
-                    }
-                } else if c.to_bits() >= p.on {
-                    ls.run = ls.run.saturating_add(1);
-                    if ls.run >= p.dwell {
-                        ls.up = true;
-                        // Capacity is two per event, so this cannot fail.
-                        let _ = out.decisions.push(Decision {
-                            event: EventId(i as u8),
-                            level,
-                            confidence: c,
-                            onset: st.onset,
-                            tick: now,
-                        });
-                    }
-                } else {
-                    ls.run = 0;
-                }
-                if ls.up {
-                    match level {
-                        Level::Alert => out.alerting |= bit,
-                        Level::Confirm => out.confirmed |= bit,
-                    }
-                }
+            let [alert, confirm] = &mut st.levels;
+            let raised_alert = alert.step(&e.levels[0], q);
+            let raised_confirm = confirm.step(&e.levels[1], q);
+            out.alerting |= bit * EventMask::from(alert.up);
+            out.confirmed |= bit * EventMask::from(confirm.up);
+            let decision = |level| Decision {
+                event: EventId(i as u8),
+                level,
+                confidence: c,
+                onset: st.onset,
+                tick: now,
+            };
+            // Capacity is two per event, so neither push can fail.
+            if raised_alert {
+                let _ = out.decisions.push(decision(Level::Alert));
+            }
+            if raised_confirm {
+                let _ = out.decisions.push(decision(Level::Confirm));
             }
         }
     }
-}
-
-/// A term's confidence from the current slot values (Q15).
-#[inline(always)]
-fn eval(t: &Term, values: &[i32; MAX_SLOTS]) -> u16 {
-    // Slots are validated below MAX_SLOTS, a power of two: the mask costs one instruction
-    // and leaves no out-of-bounds path.
-    let x = values[usize::from(t.slot) & (MAX_SLOTS - 1)];
-    t.cdf.eval(Signal::from_bits(x)).to_bits()
 }

@@ -198,11 +198,12 @@ impl core::fmt::Display for StageError {
 /// Slots a stage can read: the channels, then the features.
 pub(crate) const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
 
-// Slot reads mask the index with MAX_SLOTS - 1: one instruction, no bounds check.
-const _: () = assert!(MAX_SLOTS.is_power_of_two());
-
 /// Samples of STE history the detector holds for all its STE features together.
 pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
+
+// Slot and history reads mask the index with MAX_SLOTS - 1 or STE_POOL - 1: one
+// instruction, no bounds check.
+const _: () = assert!(MAX_SLOTS.is_power_of_two() && STE_POOL.is_power_of_two());
 
 /// A compiled stage: input slots and precomputed coefficients.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -378,25 +379,25 @@ impl Stage {
             } => {
                 let x = i64::from(get(input)).clamp(-STE_INPUT_LIMIT, STE_INPUT_LIMIT);
                 let sq = ((x * x) >> 16) as u64;
-                let start = usize::from(offset);
-                let n = usize::from(len);
-                let (Some(hist), Some(taps)) = (
-                    ring.get_mut(start..start + n),
-                    weights.get(start..start + n),
-                ) else {
-                    return 0;
-                };
                 let newest = usize::from(st.pos);
-                let Some(slot) = hist.get_mut(newest) else {
-                    return 0;
-                };
-                let oldest = core::mem::replace(slot, sq);
-                st.pos = if newest + 1 >= n {
-                    0
-                } else {
-                    (newest + 1) as u16
-                };
+                // A valid stage keeps offset + pos below STE_POOL, a power of two: the mask
+                // keeps even a state from another detector in bounds, for one instruction.
+                let oldest = core::mem::replace(
+                    &mut ring[(usize::from(offset) + newest) & (STE_POOL - 1)],
+                    sq,
+                );
+                st.pos = if st.pos + 1 >= len { 0 } else { st.pos + 1 };
                 if tapered {
+                    let start = usize::from(offset);
+                    let n = usize::from(len);
+                    let (Some(hist), Some(taps)) =
+                        (ring.get(start..start + n), weights.get(start..start + n))
+                    else {
+                        return 0;
+                    };
+                    if newest >= n {
+                        return 0;
+                    }
                     // Lag m pairs with taps[m]: lags 0..=newest run back from `newest`, the
                     // remaining lags run back from the end of the ring.
                     // Squares ≤ 2^38 and taps summing to 2^24 keep the sum below 2^62.
@@ -577,25 +578,35 @@ fn triangular(taps: &mut [u32]) {
     }
 }
 
-/// ⌊√n⌋ for a 32-bit `n`, by Newton's method from a power of two above the root; uses only
-/// 32-bit division, which the Cortex-M4 does in hardware.
+/// Seeds for [`isqrt32`]: √ of the middle of each 2²⁶-wide slice of [2³⁰, 2³²), within
+/// 1.6 % of the root anywhere in the slice.
+const SQRT_SEEDS: [u16; 48] = [
+    33268, 34263, 35229, 36169, 37085, 37980, 38853, 39708, 40544, 41364, 42167, 42956, 43730,
+    44491, 45239, 45975, 46699, 47412, 48115, 48807, 49490, 50163, 50828, 51484, 52132, 52771,
+    53403, 54028, 54646, 55256, 55860, 56458, 57049, 57634, 58214, 58787, 59355, 59918, 60475,
+    61028, 61575, 62118, 62656, 63189, 63718, 64242, 64762, 65278,
+];
+
+/// ⌊√n⌋ for a 32-bit `n`: `n` shifted left by an even count into [2³⁰, 2³²), a seed from
+/// [`SQRT_SEEDS`], two Newton steps with 32-bit division (in hardware on the Cortex-M4),
+/// which leave the root or one above it, and a final correction; then shifted back.
 #[inline]
 fn isqrt32(n: u32) -> u32 {
     if n == 0 {
         return 0;
     }
-    let bits = 32 - n.leading_zeros();
-    let mut x = 1u32 << bits.div_ceil(2);
-    // Converges in at most 6 steps from this start; the bound only guards the loop.
-    for _ in 0..8 {
-        // x ≥ 1 throughout; checked_div keeps a panic path out of the tick.
-        let y = (x + n.checked_div(x).unwrap_or(n)) / 2;
-        if y >= x {
-            break;
-        }
-        x = y;
+    let shift = n.leading_zeros() & !1;
+    let m = n << shift;
+    // m ≥ 2^30, so the index is 16..=63.
+    let mut x = u32::from(SQRT_SEEDS[((m >> 26) as usize).wrapping_sub(16) % 48]);
+    // x ≥ 2^15 throughout; `max(1)` only spares the division a zero check.
+    x = (x + m / x.max(1)) / 2;
+    x = (x + m / x.max(1)) / 2;
+    if u64::from(x) * u64::from(x) > u64::from(m) {
+        x -= 1;
     }
-    x
+    // ⌊⌊√m⌋ / 2^k⌋ = ⌊√m / 2^k⌋ = ⌊√n⌋ for k = shift / 2.
+    x >> (shift / 2)
 }
 
 /// √n for a 64-bit `n`, within a relative 2⁻¹⁵ of ⌊√n⌋ (exact below 2³²): the top 32 bits
@@ -632,11 +643,43 @@ mod tests {
             .collect()
     }
 
+    /// Every 32-bit input (a minute in release: `cargo test --release -p detector-core --
+    /// --ignored isqrt32_exhaustive`).
+    #[test]
+    #[ignore]
+    fn isqrt32_exhaustive() {
+        for n in 0..=u32::MAX {
+            let r = u64::from(isqrt32(n));
+            assert!(
+                r * r <= u64::from(n) && (r + 1) * (r + 1) > u64::from(n),
+                "n = {n}"
+            );
+        }
+    }
+
     #[test]
     fn isqrt_is_floor_below_2_pow_32_and_close_above() {
-        for n in [0u64, 1, 2, 3, 4, 15, 16, 17, 1 << 20, (1 << 32) - 1] {
+        let is_floor = |n: u64| {
             let r = isqrt64(n) as u64;
-            assert!(r * r <= n && (r + 1) * (r + 1) > n, "n = {n}");
+            r * r <= n && (r + 1) * (r + 1) > n
+        };
+        for n in [0u64, 1, 2, 3, 4, 15, 16, 17, 1 << 20, (1 << 32) - 1] {
+            assert!(is_floor(n), "n = {n}");
+        }
+        // Every seed slice's ends and middle, at every even shift, and around every square
+        // of a sparse sweep of roots (the correction step's edge).
+        for shift in (0..32).step_by(2) {
+            for k in 16u64..=64 {
+                for m in [(k << 26) - 1, k << 26, (k << 26) + (1 << 25)] {
+                    let n = (m >> shift).min(u32::MAX as u64);
+                    assert!(is_floor(n), "n = {n}");
+                }
+            }
+        }
+        for r in (1u64..65536).step_by(7) {
+            for n in [r * r - 1, r * r, r * r + r, (r + 1) * (r + 1) - 1] {
+                assert!(is_floor(n.min(u32::MAX as u64)), "n = {n}");
+            }
         }
         for n in [1u64 << 32, 1 << 40, u64::MAX / 3, u64::MAX] {
             let exact = (n as f64).sqrt();

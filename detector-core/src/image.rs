@@ -4,16 +4,17 @@
 //! `configs/approach.toml` that its build script made, so the chip never holds a
 //! [`crate::Config`].
 //!
-//! Layout, little-endian: the magic `FTD1`, the detector rate (f32), then each list as a
+//! Layout, little-endian: the magic `FTD2`, the detector rate (f32), then each list as a
 //! one-byte count followed by its items (channels: name, scale; features: name, stage;
-//! events: name, terms, levels; phases: name, event mask), and the slot dependency masks
-//! and STE window taps as fixed arrays. Loading checks every count, index, shift and
+//! the distinct (feature, CDF) pairs; events: name, terms as indices into those pairs,
+//! levels; phases: name, event mask), and the slot dependency masks and STE window taps as
+//! fixed arrays. Loading checks every count, index, shift and
 //! level, so a corrupt image is rejected rather than run.
 
 use crate::config::Name;
 
 /// The first four bytes of every image (the digit is the layout's version).
-pub(crate) const MAGIC: [u8; 4] = *b"FTD1";
+pub(crate) const MAGIC: [u8; 4] = *b"FTD2";
 
 /// Why an image was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -35,6 +35,10 @@ pub const MAX_EVENTS: usize = 8;
 pub const MAX_PHASES: usize = 8;
 /// Most context terms, and most sensor terms, per event.
 pub const MAX_TERMS: usize = 8;
+/// Most distinct (feature, CDF) pairs among all events' terms together: terms that judge
+/// the same feature with the same CDF, in one event or several, count once (and are
+/// evaluated once per tick).
+pub const MAX_DISTINCT_TERMS: usize = 64;
 /// Longest name of a channel, feature, event or phase, in bytes.
 pub const NAME_LEN: usize = 24;
 /// Longest short-time-energy window, in samples. All STE features together hold at most

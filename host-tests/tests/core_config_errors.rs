@@ -461,3 +461,37 @@ fn toml_errors() {
     let c = Config::from_toml(&approach).expect("approach.toml is valid");
     assert_eq!(Config::from_toml(&c.to_toml()).expect("round trip"), c);
 }
+
+/// A configuration of eight events with eight context and eight sensor terms each, on
+/// feature `fa`; term `k` of event `i` uses `cdf(i, k)`.
+fn full_events(cdf: impl Fn(usize, usize) -> CdfSpec) -> Config {
+    let events = (0..8)
+        .map(|i| {
+            let ctx = (0..8).map(|k| context("fa", cdf(i, k))).collect();
+            let sen = (8..16).map(|k| sensor("fa", 0.125, cdf(i, k))).collect();
+            event(&format!("e{i}"), ctx, sen)
+        })
+        .collect();
+    config(
+        1000.0,
+        &["a"],
+        vec![("fa", raw("a"))],
+        events,
+        vec![phase("p", &["e0"])],
+    )
+}
+
+#[test]
+fn terms_alike_count_once_against_the_distinct_term_limit() {
+    // 128 terms, one distinct pair: builds.
+    assert!(Detector::build(&full_events(|_, _| sigmoid(0.0, 1.0))).is_ok());
+    // 64 distinct pairs: each event's context term k and sensor term k + 8 are alike.
+    let per_event = |i: usize, k: usize| sigmoid(0.0, 1.0 + (i * 8 + k % 8) as f32);
+    assert!(Detector::build(&full_events(per_event)).is_ok());
+    // 128 distinct pairs: the 65th, event e4's first context term, is rejected by name.
+    let err = Detector::build(&full_events(|i, k| sigmoid(0.0, 1.0 + (i * 16 + k) as f32)))
+        .expect_err("more distinct terms than the detector holds");
+    assert_eq!(err.item, Item::ContextTerm(name("e4"), name("fa")));
+    assert_eq!(err.problem, Problem::DistinctTerms(64));
+    assert!(err.to_string().contains("more than 64 distinct"), "{err}");
+}
