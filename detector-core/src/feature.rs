@@ -597,11 +597,11 @@ fn isqrt32(n: u32) -> u32 {
     }
     let shift = n.leading_zeros() & !1;
     let m = n << shift;
-    // m ≥ 2^30, so the index is 16..=63.
-    let mut x = u32::from(SQRT_SEEDS[((m >> 26) as usize).wrapping_sub(16) % 48]);
-    // x ≥ 2^15 throughout; `max(1)` only spares the division a zero check.
-    x = (x + m / x.max(1)) / 2;
-    x = (x + m / x.max(1)) / 2;
+    // m ≥ 2^30, so the index is 16..=63 and `min` only spares a bounds check.
+    let mut x = u32::from(SQRT_SEEDS[((m >> 26) as usize).wrapping_sub(16).min(47)]);
+    // x ≥ 2^15 throughout, so the divisions never meet zero.
+    x = (x + m.checked_div(x).unwrap_or(0)) / 2;
+    x = (x + m.checked_div(x).unwrap_or(0)) / 2;
     if u64::from(x) * u64::from(x) > u64::from(m) {
         x -= 1;
     }
