@@ -6,15 +6,17 @@ use crate::replay::DecisionRecord;
 /// What a run's confirmations amount to, given the event expected.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Outcome {
-    /// The expected event was the first confirmed, at or after its onset.
+    /// The expected event was confirmed at or after its onset, and nothing else was
+    /// confirmed in the whole run.
     Correct {
-        /// From the true onset to the confirmation (s).
+        /// From the true onset to the (first) confirmation (s).
         latency_s: f64,
     },
-    /// Something else was confirmed first: another event, or any event before the true
-    /// onset, or any event in a run where none is expected.
+    /// Something else was confirmed at some point of the run: another event (even after
+    /// the right one), the right one before its true onset, or any event in a run where
+    /// none is expected.
     Wrong {
-        /// The event wrongly confirmed.
+        /// The first event wrongly confirmed.
         event: String,
         /// When (s).
         t_s: f64,
@@ -35,26 +37,23 @@ impl Outcome {
 /// Scores one run: `expected` is the true event and its onset (s), or `None` for a run in
 /// which nothing should be confirmed.
 pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> Outcome {
-    let first = decisions.iter().find(|d| d.is_confirm());
-    match (expected, first) {
-        (None, None) => Outcome::QuietAsExpected,
-        (Some(_), None) => Outcome::Missed,
-        (None, Some(d)) => Outcome::Wrong {
+    let mut confirmations = decisions.iter().filter(|d| d.is_confirm());
+    let is_wrong = |d: &&DecisionRecord| match expected {
+        Some((event, onset)) => d.event != event || d.t_s < onset,
+        None => true,
+    };
+    if let Some(d) = confirmations.clone().find(is_wrong) {
+        return Outcome::Wrong {
             event: d.event.clone(),
             t_s: d.t_s,
+        };
+    }
+    match (expected, confirmations.next()) {
+        (None, _) => Outcome::QuietAsExpected,
+        (Some(_), None) => Outcome::Missed,
+        (Some((_, onset)), Some(d)) => Outcome::Correct {
+            latency_s: d.t_s - onset,
         },
-        (Some((event, onset)), Some(d)) => {
-            if d.event == event && d.t_s >= onset {
-                Outcome::Correct {
-                    latency_s: d.t_s - onset,
-                }
-            } else {
-                Outcome::Wrong {
-                    event: d.event.clone(),
-                    t_s: d.t_s,
-                }
-            }
-        }
     }
 }
 
@@ -180,6 +179,20 @@ mod tests {
             classify(Some(("contact", 0.020)), &[confirm("disturbance", 0.021)]),
             Outcome::Wrong { .. }
         ));
+        // Another event confirmed after the right one is still a wrong confirmation.
+        assert_eq!(
+            classify(
+                Some(("disturbance", 0.020)),
+                &[
+                    confirm("disturbance", 0.021),
+                    confirm("link_collision", 0.024)
+                ]
+            ),
+            Outcome::Wrong {
+                event: "link_collision".into(),
+                t_s: 0.024
+            }
+        );
         // Confirming the right event before it happened is a false alarm.
         assert!(matches!(
             classify(Some(("contact", 0.020)), &[confirm("contact", 0.010)]),
