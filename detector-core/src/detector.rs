@@ -128,6 +128,27 @@ struct Psi {
     events: EventMask,
 }
 
+impl Psi {
+    /// A ψ used by no event yet; its channels are those `slot` depends on.
+    fn new(slot: u8, cdf: Cdf, slot_channels: &[ChannelMask; MAX_SLOTS]) -> Psi {
+        Psi {
+            slot,
+            cdf,
+            channels: slot_channels.get(usize::from(slot)).copied().unwrap_or(0),
+            events: 0,
+        }
+    }
+}
+
+/// Marks ψ `k` as used by the events in `bit` and gives the channels it reads (none for an
+/// index past the table).
+fn use_psi(psis: &mut [Psi], k: usize, bit: EventMask) -> ChannelMask {
+    psis.get_mut(k).map_or(0, |p| {
+        p.events |= bit;
+        p.channels
+    })
+}
+
 /// A sensor term: which ψ, and its weight (Q15).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Weighted {
@@ -435,22 +456,13 @@ impl Detector {
             let k = match psis.iter().position(|p| p.slot == slot && p.cdf == cdf) {
                 Some(k) => k,
                 None => {
-                    let psi = Psi {
-                        slot,
-                        cdf,
-                        channels: slot_channels.get(usize::from(slot)).copied().unwrap_or(0),
-                        events: 0,
-                    };
-                    if psis.push(psi).is_err() {
+                    if psis.push(Psi::new(slot, cdf, &slot_channels)).is_err() {
                         return err(item, Problem::DistinctTerms(MAX_PSI));
                     }
                     psis.len() - 1
                 }
             };
-            if let Some(p) = psis.get_mut(k) {
-                p.events |= bit;
-            }
-            Ok::<_, ConfigError>((k as u8, psis.get(k).map_or(0, |p| p.channels)))
+            Ok::<_, ConfigError>((k as u8, use_psi(&mut psis, k, bit)))
         };
         let mut events = Vec::new();
         for (i, e) in config.events.iter().enumerate() {
@@ -694,18 +706,8 @@ impl Detector {
         }
         for _ in 0..r.count(MAX_PSI, "CDF count")? {
             let slot = r.below(MAX_SLOTS, "term feature")?;
-            let cdf = Cdf::read_image(r)?;
-            let channels = self
-                .slot_channels
-                .get(usize::from(slot))
-                .copied()
-                .unwrap_or(0);
-            let _ = self.psis.push(Psi {
-                slot,
-                cdf,
-                channels,
-                events: 0,
-            });
+            let psi = Psi::new(slot, Cdf::read_image(r)?, &self.slot_channels);
+            let _ = self.psis.push(psi);
         }
         let events = r.count(MAX_EVENTS, "event count")?;
         for i in 0..events {
@@ -723,17 +725,9 @@ impl Detector {
                 onset_level: 0,
             };
             let psis = self.psis.len();
-            // Marks ψ `k` as used by this event and gives its channels.
-            let mut use_psi = |k: u8| {
-                let p = self.psis.get_mut(usize::from(k));
-                p.map_or(0, |p| {
-                    p.events |= 1 << i;
-                    p.channels
-                })
-            };
             for _ in 0..r.count(MAX_TERMS, "context term count")? {
                 let k = r.below(psis, "context term CDF")?;
-                e.context_channels |= use_psi(k);
+                e.context_channels |= use_psi(&mut self.psis, usize::from(k), 1 << i);
                 let _ = e.context.push(k);
             }
             let mut total = 0u32;
@@ -745,7 +739,7 @@ impl Detector {
                 if total > u32::from(Confidence::ONE.to_bits()) + 2 {
                     return Err(ImageError::Invalid("term weights"));
                 }
-                e.sensor_channels |= use_psi(k);
+                e.sensor_channels |= use_psi(&mut self.psis, usize::from(k), 1 << i);
                 let _ = e.sensor.push(Weighted { psi: k, weight });
             }
             if e.sensor.is_empty() {
