@@ -53,6 +53,16 @@ pub enum StageSpec<N> {
         /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
+    /// First-order high-pass: x − y with y the [`StageSpec::LowPass`] of x at the same
+    /// cut-off, i.e. what the input does above f_c, its offset and slow drift removed. Zero
+    /// on the first tick. Bit for bit the `difference` of the input and its `low_pass`, in
+    /// one feature.
+    HighPass {
+        /// Source channel or feature.
+        input: N,
+        /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
+        cutoff_hz: f32,
+    },
     /// Rate of change: (x_n − x_{n−1}) · f_s, in the input's unit per second. Zero on the
     /// first tick.
     Rate {
@@ -113,6 +123,10 @@ impl<N> StageSpec<N> {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
             },
+            StageSpec::HighPass { input, cutoff_hz } => StageSpec::HighPass {
+                input: f(input)?,
+                cutoff_hz: *cutoff_hz,
+            },
             StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
             StageSpec::Difference { a, b } => StageSpec::Difference { a: f(a)?, b: f(b)? },
             StageSpec::Dot { a, b } => StageSpec::Dot {
@@ -140,6 +154,7 @@ impl<N> StageSpec<N> {
             StageSpec::Raw { .. } => "raw",
             StageSpec::Abs { .. } => "abs",
             StageSpec::LowPass { .. } => "low_pass",
+            StageSpec::HighPass { .. } => "high_pass",
             StageSpec::Rate { .. } => "rate",
             StageSpec::Difference { .. } => "difference",
             StageSpec::Dot { .. } => "dot",
@@ -154,7 +169,7 @@ impl<N> StageSpec<N> {
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
 pub enum StageError {
-    /// The low-pass cut-off is not finite, not positive, or not below half the detector rate.
+    /// The low- or high-pass cut-off is not finite, not positive, or not below half the detector rate.
     Cutoff {
         /// The cut-off in Hz.
         cutoff_hz: f32,
@@ -215,6 +230,11 @@ pub(crate) enum Stage {
         input: u8,
         alpha: u32,
     },
+    /// The input minus its low-pass, `alpha` as for [`Stage::LowPass`].
+    HighPass {
+        input: u8,
+        alpha: u32,
+    },
     /// `rate` is the detector rate in Hz, Q8.
     Rate {
         input: u8,
@@ -260,24 +280,14 @@ impl Stage {
         Ok(match *spec {
             StageSpec::Raw { input } => Stage::Raw(input),
             StageSpec::Abs { input } => Stage::Abs(input),
-            StageSpec::LowPass { input, cutoff_hz } => {
-                let nyquist_hz = rate_hz / 2.0;
-                if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < nyquist_hz) {
-                    return Err(StageError::Cutoff {
-                        cutoff_hz,
-                        nyquist_hz,
-                    });
-                }
-                // α = Δt / (τ + Δt) = 1 / (1 + f_s / (2π f_c)), in (0, 1).
-                let alpha = 1.0 / (1.0 + rate_hz / (2.0 * core::f32::consts::PI * cutoff_hz));
-                // In Q31 through f32 (the chip's FPU, no soft-float f64): 24 significant
-                // bits, a relative 6·10⁻⁸, far below the filter's other errors.
-                let alpha = (alpha * 2_147_483_648.0) as u64;
-                Stage::LowPass {
-                    input,
-                    alpha: alpha.clamp(1, (1 << 31) - 1) as u32,
-                }
-            }
+            StageSpec::LowPass { input, cutoff_hz } => Stage::LowPass {
+                input,
+                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+            },
+            StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
+                input,
+                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+            },
             StageSpec::Rate { input } => Stage::Rate {
                 input,
                 rate: (rate_hz * 256.0 + 0.5) as u32,
@@ -334,17 +344,10 @@ impl Stage {
         match *self {
             Stage::Raw(i) => get(i),
             Stage::Abs(i) => get(i).saturating_abs(),
-            Stage::LowPass { input, alpha } => {
+            Stage::LowPass { input, alpha } => low_pass(st, get(input), alpha),
+            Stage::HighPass { input, alpha } => {
                 let x = get(input);
-                if !st.primed {
-                    st.primed = true;
-                    st.acc = i64::from(x) << 16;
-                } else {
-                    // |diff| < 2^32 and alpha < 2^31, so the product fits in 63 bits.
-                    let diff = i64::from(x) - (st.acc >> 16);
-                    st.acc += (diff * i64::from(alpha)) >> 15;
-                }
-                sat32(st.acc >> 16)
+                x.saturating_sub(low_pass(st, x, alpha))
             }
             Stage::Rate { input, rate } => {
                 let x = get(input);
@@ -446,6 +449,11 @@ impl Stage {
                 w.u8(input);
                 w.u32(alpha);
             }
+            Stage::HighPass { input, alpha } => {
+                w.u8(8);
+                w.u8(input);
+                w.u32(alpha);
+            }
             Stage::Rate { input, rate } => {
                 w.u8(3);
                 w.u8(input);
@@ -489,12 +497,18 @@ impl Stage {
             0 => Stage::Raw(slot(r)?),
             1 => Stage::Abs(slot(r)?),
             2 => {
-                let input = slot(r)?;
-                let alpha = r.u32()?;
-                if alpha == 0 || alpha >= 1 << 31 {
-                    return Err(ImageError::Invalid("low-pass coefficient"));
+                let (input, alpha) = (slot(r)?, r.u32()?);
+                Stage::LowPass {
+                    input,
+                    alpha: checked_alpha(alpha)?,
                 }
-                Stage::LowPass { input, alpha }
+            }
+            8 => {
+                let (input, alpha) = (slot(r)?, r.u32()?);
+                Stage::HighPass {
+                    input,
+                    alpha: checked_alpha(alpha)?,
+                }
             }
             3 => {
                 let input = slot(r)?;
@@ -552,6 +566,46 @@ pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; STE_POOL]) -> bool {
         }
         _ => true,
     }
+}
+
+/// α = Δt / (τ + Δt) = 1 / (1 + f_s / (2π f_c)) in Q31, for a cut-off below half the rate.
+fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
+    let nyquist_hz = rate_hz / 2.0;
+    if !(cutoff_hz.is_finite() && cutoff_hz > 0.0 && cutoff_hz < nyquist_hz) {
+        return Err(StageError::Cutoff {
+            cutoff_hz,
+            nyquist_hz,
+        });
+    }
+    let alpha = 1.0 / (1.0 + rate_hz / (2.0 * core::f32::consts::PI * cutoff_hz));
+    // In Q31 through f32 (the chip's FPU, no soft-float f64): 24 significant bits, a
+    // relative 6·10⁻⁸, far below the filter's other errors.
+    let alpha = (alpha * 2_147_483_648.0) as u64;
+    Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
+}
+
+/// A low-pass coefficient read from an image: in (0, 1) as Q31.
+fn checked_alpha(alpha: u32) -> Result<u32, ImageError> {
+    if alpha == 0 || alpha >= 1 << 31 {
+        return Err(ImageError::Invalid("low-pass coefficient"));
+    }
+    Ok(alpha)
+}
+
+/// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The
+/// first sample sets y. The output stays between the previous output and `x` (the step
+/// rounds toward minus infinity on a Q32 state), so it always fits an `i32`.
+#[inline(always)]
+fn low_pass(st: &mut StageState, x: i32, alpha: u32) -> i32 {
+    if !st.primed {
+        st.primed = true;
+        st.acc = i64::from(x) << 16;
+    } else {
+        // |diff| < 2^32 and alpha < 2^31, so the product fits in 63 bits.
+        let diff = i64::from(x) - (st.acc >> 16);
+        st.acc += (diff * i64::from(alpha)) >> 15;
+    }
+    sat32(st.acc >> 16)
 }
 
 /// Saturates to the `i32` range.

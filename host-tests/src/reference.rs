@@ -178,6 +178,7 @@ enum Stage {
     Raw(usize),
     Abs(usize),
     LowPass { input: usize, alpha: f64 },
+    HighPass { input: usize, alpha: f64 },
     Rate { input: usize, rate: f64 },
     Difference(usize, usize),
     Dot([usize; 2], [usize; 2]),
@@ -232,6 +233,18 @@ struct StageState {
     previous: Option<f64>,
     /// Inputs, most recent last (STE), at most the window length.
     history: Vec<f64>,
+}
+
+impl StageState {
+    /// One tick of the low-pass y += α (x − y); the first sample sets y.
+    fn low_pass(&mut self, x: f64, alpha: f64) -> f64 {
+        if self.previous.is_none() {
+            self.y = x;
+        }
+        self.previous = Some(x);
+        self.y += alpha * (x - self.y);
+        self.y
+    }
 }
 
 /// One decision level's running state.
@@ -347,6 +360,10 @@ impl Model {
                 StageSpec::Raw { input } => Stage::Raw(input),
                 StageSpec::Abs { input } => Stage::Abs(input),
                 StageSpec::LowPass { input, cutoff_hz } => Stage::LowPass {
+                    input,
+                    alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                },
+                StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
                 },
@@ -478,14 +495,10 @@ impl Model {
             let value = match stage {
                 Stage::Raw(i) => v(*i),
                 Stage::Abs(i) => v(*i).abs(),
-                Stage::LowPass { input, alpha } => {
+                Stage::LowPass { input, alpha } => st.low_pass(v(*input), *alpha),
+                Stage::HighPass { input, alpha } => {
                     let x = v(*input);
-                    if st.previous.is_none() {
-                        st.y = x;
-                    }
-                    st.previous = Some(x);
-                    st.y += alpha * (x - st.y);
-                    st.y
+                    x - st.low_pass(x, *alpha)
                 }
                 Stage::Rate { input, rate } => {
                     let x = v(*input);

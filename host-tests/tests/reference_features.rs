@@ -10,6 +10,7 @@
 //! | dot | any | 1 LSB (saturating) |
 //! | magnitude | any | `1 LSB + 2⁻¹⁵ |m|` (16 significant bits above 1 unit) |
 //! | low-pass | `|x| < 16384`, `f_s/1000 ≤ f_c ≤ 0.45 f_s` | `1 LSB + 2⁻²⁰ max|x|` |
+//! | high-pass | as the low-pass | as the low-pass, and bit for bit `x − low_pass(x)` |
 //! | STE, eq. 17 | `|x| < 256`, N in 1..=128 | `2 LSB + N 2⁻²³ max x² + N 2⁻²⁵ ζ` |
 //!
 //! The STE bound's middle term is the Q24 rounding of the window taps (a triangular window's
@@ -167,6 +168,29 @@ proptest! {
                 prop_assert!((got[i] - want[i]).abs() <= LSB + max_x / 1_048_576.0,
                     "feature {} tick {}: engine {} model {}", i, t, got[i], want[i]);
             }
+        }
+    }
+
+    /// The high-pass is, bit for bit, the input less its low-pass at the same cut-off (the
+    /// two-feature form it replaces), and within its bound of the model.
+    #[test]
+    fn high_pass_is_the_input_less_its_low_pass(
+        rate in 10.0f32..=50_000.0,
+        fraction in 0.001f32..=0.45,
+        s in samples(4, 29, 300),
+    ) {
+        let cutoff_hz = rate * fraction;
+        let c = features_config(rate, vec![
+            ("hp", StageSpec::HighPass { input: name("x"), cutoff_hz }),
+            ("lp", StageSpec::LowPass { input: name("x"), cutoff_hz }),
+            ("diff", StageSpec::Difference { a: name("x"), b: name("lp") }),
+        ]);
+        let mut max_x: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
+            prop_assert_eq!(got[0].to_bits(), got[2].to_bits(), "tick {}", t);
+            prop_assert!((got[0] - want[0]).abs() <= LSB + max_x / 1_048_576.0,
+                "tick {}: engine {} model {}", t, got[0], want[0]);
         }
     }
 
