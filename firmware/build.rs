@@ -5,7 +5,8 @@
 //!   core's `std` feature (a bad configuration fails the build with the core's message),
 //!   checked against the channels the board can feed and the sample timer's clock, and
 //!   built into a detector and written as its image (`detector.image`), which the chip
-//!   loads in place at boot;
+//!   loads in place at boot, and its tick generated with the tables written in as
+//!   constants (`tick.rs`, `Detector::to_rust`), which the firmware runs;
 //! - `build_consts.rs`: the configuration's CRC-32 (reported in the status heartbeat),
 //!   its source path, the sample timer's period for its rate, and the CAN node id from
 //!   `FINGERTIP_NODE_ID` (0..=15, default 0);
@@ -79,6 +80,7 @@ fn main() -> Result<()> {
         return Err(format!("{config_rel}: the detector image does not load back the same").into());
     }
     fs::write(out.join("detector.image"), &bytes)?;
+    fs::write(out.join("tick.rs"), detector.to_rust())?;
 
     let node = match env::var("FINGERTIP_NODE_ID") {
         Ok(s) => s

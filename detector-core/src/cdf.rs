@@ -128,12 +128,13 @@ impl core::fmt::Display for CdfError {
 /// (`span` < 2¹⁷ raw) shifts the distance up by `pre` = 15, which keeps it below 2³², and
 /// uses `mul = 2³² / span`; a wide one takes the distance as it is with `mul = 2⁴⁷ / span`
 /// (at most 2³⁰). Rounding `mul` moves `t` by less than half a Q15 step.
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Ramp {
-    start: i32,
-    span: u32,
-    mul: u32,
-    pre: u8,
+pub struct Ramp {
+    pub start: i32,
+    pub span: u32,
+    pub mul: u32,
+    pub pre: u8,
 }
 
 /// Spans below this are narrow (see [`Ramp`]).
@@ -192,12 +193,15 @@ fn smooth(t: u32) -> u32 {
     }
 }
 
-/// A validated confidence distribution function, ready to evaluate.
+/// A validated confidence distribution function, ready to evaluate. (Its shape is public
+/// only for the ticks that `Detector::to_rust` (feature `std`) generates, which
+/// write the values a detector built.)
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Cdf(Shape);
+pub struct Cdf(#[doc(hidden)] pub Shape);
 
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Shape {
+pub enum Shape {
     Rising(Ramp),
     Falling(Ramp),
     Bell { center: i32, ramp: Ramp },

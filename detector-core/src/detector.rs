@@ -7,7 +7,12 @@
 
 use heapless::Vec;
 
+#[cfg(feature = "std")]
+#[path = "codegen.rs"]
+mod codegen;
+
 use crate::cdf::{Cdf, CdfSpec};
+use crate::compiled;
 use crate::config::{Config, ConfigError, Item, LevelSpec, Name, Problem};
 use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState, taps_valid};
 use crate::image::{ImageError, Reader};
@@ -113,8 +118,28 @@ pub struct Output {
     pub decisions: Vec<Decision, { 2 * MAX_EVENTS }>,
 }
 
-// Reads of `State::psi` mask the index with MAX_PSI - 1: one instruction, no bounds check.
-const _: () = assert!(MAX_PSI.is_power_of_two() && MAX_PSI <= 256);
+impl Output {
+    /// Clears every field for a new tick (no allocation, no copy of a whole `Output`).
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.confidences = [Confidence::ZERO; MAX_EVENTS];
+        self.evaluated = 0;
+        self.unjudgeable = 0;
+        self.degraded = 0;
+        self.alerting = 0;
+        self.confirmed = 0;
+        self.decisions.clear();
+    }
+}
+
+// Reads of `State`'s arrays mask their index with the length - 1: one instruction, no bounds
+// check.
+const _: () = assert!(
+    MAX_PSI.is_power_of_two()
+        && MAX_PSI <= 256
+        && MAX_FEATURES.is_power_of_two()
+        && MAX_EVENTS.is_power_of_two()
+);
 
 /// One feature judged by one CDF (the paper's ψ), evaluated once per tick however many
 /// terms of however many events name the same pair.
@@ -151,16 +176,20 @@ fn use_psi(psis: &mut [Psi], k: usize, bit: EventMask) -> ChannelMask {
 
 /// A sensor term: which ψ, and its weight (Q15).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct Weighted {
+pub(crate) struct Weighted {
     psi: u8,
     weight: u16,
 }
 
+/// A decision level: up at `on` (Q15) after `dwell` ticks in a row, down below `off`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-struct LevelParams {
-    on: u16,
-    off: u16,
-    dwell: u16,
+pub struct LevelParams {
+    /// Confidence at or above which the level counts ticks (Q15).
+    pub on: u16,
+    /// Confidence below which a raised level falls (Q15).
+    pub off: u16,
+    /// Ticks in a row at or above `on` before the level is raised.
+    pub dwell: u16,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -254,6 +283,114 @@ impl State {
     /// The active phase.
     pub fn phase(&self) -> PhaseId {
         PhaseId(self.phase)
+    }
+
+    // The steps of a tick, one item at a time: the interpreter ([`Detector::tick_into`])
+    // loops over its tables and calls them, a generated tick (`Detector::to_rust`) calls
+    // them with constants. Indices are masked to their array's power-of-two length: one
+    // instruction, no bounds check, no panic whatever they are.
+
+    /// Stores the first `channels` samples of `inputs` in their slots.
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn load_samples(&mut self, inputs: &Inputs, channels: usize) {
+        for (v, s) in self
+            .values
+            .iter_mut()
+            .zip(inputs.samples.iter())
+            .take(channels)
+        {
+            *v = s.to_bits();
+        }
+    }
+
+    /// Updates feature `k`, computed by `stage` of `detector`.
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn step_feature(&mut self, k: usize, stage: &Stage, detector: &Detector) {
+        let k = k & (MAX_FEATURES - 1);
+        let y = stage.update(
+            &mut self.stages[k],
+            &self.values,
+            &mut self.ring,
+            &detector.weights,
+        );
+        self.values[(MAX_CHANNELS + k) & (MAX_SLOTS - 1)] = y;
+    }
+
+    /// Evaluates ψ `k`: `cdf` of the value in `slot`. Returns its confidence (Q15).
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn eval_psi(&mut self, k: usize, slot: u8, cdf: &Cdf) -> u32 {
+        let x = self.values[usize::from(slot) & (MAX_SLOTS - 1)];
+        let q = cdf.eval(Signal::from_bits(x)).to_bits();
+        self.psi[k & (MAX_PSI - 1)] = q;
+        u32::from(q)
+    }
+
+    /// ψ `k`'s confidence at the last tick (Q15).
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn psi_value(&self, k: usize) -> u32 {
+        u32::from(self.psi[k & (MAX_PSI - 1)])
+    }
+
+    /// Lowers every level of event `i` and forgets its onset (it cannot be judged).
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn reset_event(&mut self, i: usize) {
+        self.events[i & (MAX_EVENTS - 1)] = EventState::default();
+    }
+
+    /// Sets ψ `k` to 0 (its feature reads a faulty channel).
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn clear_psi(&mut self, k: usize) {
+        self.psi[k & (MAX_PSI - 1)] = 0;
+    }
+
+    /// Decision levels and onset of event `i` at confidence `c`: tracks the onset, steps
+    /// the alert and confirm levels, and reports them in `out`.
+    #[doc(hidden)]
+    #[inline(always)]
+    pub fn decide_event(
+        &mut self,
+        i: usize,
+        levels: &[LevelParams; 2],
+        onset_level: u16,
+        c: Confidence,
+        now: Tick,
+        out: &mut Output,
+    ) {
+        let i = i & (MAX_EVENTS - 1);
+        let st = &mut self.events[i];
+        let bit: EventMask = 1 << i;
+        let q = c.to_bits();
+        if q <= onset_level {
+            st.rising = false;
+        } else if !st.rising {
+            st.rising = true;
+            st.onset = now;
+        }
+        let [alert, confirm] = &mut st.levels;
+        let raised_alert = alert.step(&levels[0], q);
+        let raised_confirm = confirm.step(&levels[1], q);
+        out.alerting |= bit * EventMask::from(alert.up);
+        out.confirmed |= bit * EventMask::from(confirm.up);
+        let decision = |level| Decision {
+            event: EventId(i as u8),
+            level,
+            confidence: c,
+            onset: st.onset,
+            tick: now,
+        };
+        // Capacity is two per event, so neither push can fail.
+        if raised_alert {
+            let _ = out.decisions.push(decision(Level::Alert));
+        }
+        if raised_confirm {
+            let _ = out.decisions.push(decision(Level::Confirm));
+        }
     }
 }
 
@@ -883,12 +1020,7 @@ impl Detector {
     /// [`Detector::tick`] writing into a caller's `out`, which is cleared first: no
     /// [`Output`] is built and copied per tick (the firmware's way).
     pub fn tick_into(&self, state: &mut State, now: Tick, inputs: &Inputs, out: &mut Output) {
-        out.confidences = [Confidence::ZERO; MAX_EVENTS];
-        out.unjudgeable = 0;
-        out.degraded = 0;
-        out.alerting = 0;
-        out.confirmed = 0;
-        out.decisions.clear();
+        out.clear();
         self.update_features(state, inputs);
         self.term_confidences(state, inputs.faults, out);
         self.combine(state, out);
@@ -898,15 +1030,9 @@ impl Detector {
     /// Stage 1: stores the samples and updates every feature, in order. Features run in
     /// every phase so they are warm when the phase changes.
     pub fn update_features(&self, state: &mut State, inputs: &Inputs) {
-        let n = self.channel_names.len();
-        for (v, s) in state.values.iter_mut().zip(inputs.samples.iter()).take(n) {
-            *v = s.to_bits();
-        }
-        for (k, (stage, st)) in self.stages.iter().zip(state.stages.iter_mut()).enumerate() {
-            let y = stage.update(st, &state.values, &mut state.ring, &self.weights);
-            // k < MAX_FEATURES, so the slot is below MAX_SLOTS (a power of two) and the mask
-            // only spares a bounds check.
-            state.values[(MAX_CHANNELS + k) & (MAX_SLOTS - 1)] = y;
+        state.load_samples(inputs, self.channel_names.len());
+        for (k, stage) in self.stages.iter().enumerate() {
+            state.step_feature(k, stage, self);
         }
     }
 
@@ -917,18 +1043,15 @@ impl Detector {
     pub fn term_confidences(&self, state: &mut State, faults: ChannelMask, out: &mut Output) {
         let active = self.phase_events(PhaseId(state.phase));
         out.evaluated = active;
-        for (p, c) in self.psis.iter().zip(state.psi.iter_mut()) {
+        for (k, p) in self.psis.iter().enumerate() {
             if p.events & active == 0 {
                 continue;
             }
-            *c = if p.channels & faults != 0 {
-                0
+            if p.channels & faults != 0 {
+                state.clear_psi(k);
             } else {
-                // Slots are validated below MAX_SLOTS, a power of two: the mask costs one
-                // instruction and leaves no out-of-bounds path.
-                let x = state.values[usize::from(p.slot) & (MAX_SLOTS - 1)];
-                p.cdf.eval(Signal::from_bits(x)).to_bits()
-            };
+                state.eval_psi(k, p.slot, &p.cdf);
+            }
         }
         if faults == 0 {
             return;
@@ -955,8 +1078,7 @@ impl Detector {
     /// confidences: Π context × min(1, Σ weight × sensor), each product rounded to nearest
     /// in Q15.
     pub fn combine(&self, state: &State, out: &mut Output) {
-        // ψ indices are validated below MAX_PSI, a power of two: masked reads stay in bounds.
-        let psi = |k: u8| u32::from(state.psi[usize::from(k) & (MAX_PSI - 1)]);
+        let psi = |k: u8| state.psi_value(usize::from(k));
         let judged = out.evaluated & !out.unjudgeable;
         for (i, (e, c)) in self
             .events
@@ -967,66 +1089,33 @@ impl Detector {
             if judged & (1 << i) == 0 {
                 continue;
             }
-            // Every factor is at most 2^15, so no product exceeds 2^15 after rounding.
             let product = e
                 .context
                 .iter()
-                .fold(1 << 15, |acc, &k| (acc * psi(k) + (1 << 14)) >> 15);
-            // Weights sum to at most 2^15 + 2, so the sum stays below 2^31.
+                .fold(compiled::ONE, |acc, &k| compiled::product(acc, psi(k)));
             let sum: u32 = e
                 .sensor
                 .iter()
                 .map(|t| u32::from(t.weight) * psi(t.psi))
                 .sum();
-            let sum = ((sum + (1 << 14)) >> 15).min(1 << 15);
-            *c = Confidence::from_bits_clamped((product * sum + (1 << 14)) >> 15);
+            *c = compiled::eq14(product, sum);
         }
     }
 
     /// Stage 4: decision levels with hysteresis and dwell, and onset tracking, for the
     /// active phase's events. An unjudgeable event has every level lowered.
     pub fn decide(&self, state: &mut State, now: Tick, out: &mut Output) {
-        for (i, ((e, st), &c)) in self
-            .events
-            .iter()
-            .zip(state.events.iter_mut())
-            .zip(out.confidences.iter())
-            .enumerate()
-        {
+        for (i, e) in self.events.iter().enumerate() {
             let bit: EventMask = 1 << i;
             if out.evaluated & bit == 0 {
                 continue;
             }
             if out.unjudgeable & bit != 0 {
-                *st = EventState::default();
+                state.reset_event(i);
                 continue;
             }
-            let q = c.to_bits();
-            if q <= e.onset_level {
-                st.rising = false;
-            } else if !st.rising {
-                st.rising = true;
-                st.onset = now;
-            }
-            let [alert, confirm] = &mut st.levels;
-            let raised_alert = alert.step(&e.levels[0], q);
-            let raised_confirm = confirm.step(&e.levels[1], q);
-            out.alerting |= bit * EventMask::from(alert.up);
-            out.confirmed |= bit * EventMask::from(confirm.up);
-            let decision = |level| Decision {
-                event: EventId(i as u8),
-                level,
-                confidence: c,
-                onset: st.onset,
-                tick: now,
-            };
-            // Capacity is two per event, so neither push can fail.
-            if raised_alert {
-                let _ = out.decisions.push(decision(Level::Alert));
-            }
-            if raised_confirm {
-                let _ = out.decisions.push(decision(Level::Confirm));
-            }
+            let c = out.confidences[i & (MAX_EVENTS - 1)];
+            state.decide_event(i, &e.levels, e.onset_level, c, now, out);
         }
     }
 }

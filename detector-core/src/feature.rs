@@ -220,9 +220,12 @@ pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
 // instruction, no bounds check.
 const _: () = assert!(MAX_SLOTS.is_power_of_two() && STE_POOL.is_power_of_two());
 
-/// A compiled stage: input slots and precomputed coefficients.
+/// A compiled stage: input slots and precomputed coefficients. Public for the ticks that
+/// `Detector::to_rust` (feature `std`) generates, which write the values a
+/// detector built; other values are not supported.
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Stage {
+pub enum Stage {
     Raw(u8),
     Abs(u8),
     /// `alpha` is α in Q31.
@@ -330,7 +333,7 @@ impl Stage {
 
     /// Feeds one tick: reads input slots from `values`, returns the feature's new value.
     /// `ring` is the detector's STE history, `weights` its tapered window taps.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn update(
         &self,
         st: &mut StageState,
@@ -593,8 +596,11 @@ fn checked_alpha(alpha: u32) -> Result<u32, ImageError> {
 }
 
 /// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The
-/// first sample sets y. The output stays between the previous output and `x` (the step
-/// rounds toward minus infinity on a Q32 state), so it always fits an `i32`.
+/// first sample sets y.
+///
+/// The output needs no saturation: with y = ⌊acc / 2¹⁶⌋ and 0 < α < 1, a step down adds
+/// ⌊(x − y) 2¹⁶ α⌋ ≥ (x − y) 2¹⁶, a step up less than (x − y) 2¹⁶, so the new y lies
+/// between x and the old y, inside the `i32` range (a property test holds it there).
 #[inline(always)]
 fn low_pass(st: &mut StageState, x: i32, alpha: u32) -> i32 {
     if !st.primed {
@@ -605,7 +611,7 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32) -> i32 {
         let diff = i64::from(x) - (st.acc >> 16);
         st.acc += (diff * i64::from(alpha)) >> 15;
     }
-    sat32(st.acc >> 16)
+    (st.acc >> 16) as i32
 }
 
 /// Saturates to the `i32` range.
@@ -769,6 +775,42 @@ mod tests {
         let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI * 50.0));
         assert!((y[1] - alpha).abs() < 1e-4, "{} vs {alpha}", y[1]);
         assert!((y[300] - 1.0).abs() < 2.0 / 65536.0);
+    }
+
+    /// The low-pass output lies between its input and its last output, so it needs no
+    /// saturation: full-range jumps, every α from the smallest to the largest.
+    #[test]
+    fn low_pass_stays_between_its_input_and_its_last_output() {
+        let mut seed = 0x2545_f491_u32;
+        let mut next = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed
+        };
+        let extremes = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
+        for alpha in [1, 2, 1 << 20, 1 << 30, (1 << 31) - 2, (1 << 31) - 1] {
+            let mut st = StageState::default();
+            let mut last = low_pass(&mut st, 0, alpha);
+            for k in 0..20_000 {
+                let x = if k % 3 == 0 {
+                    extremes[next() as usize % extremes.len()]
+                } else {
+                    next() as i32
+                };
+                let y = low_pass(&mut st, x, alpha);
+                assert_eq!(
+                    i64::from(y),
+                    st.acc >> 16,
+                    "alpha {alpha}: the state left the range"
+                );
+                assert!(
+                    (last.min(x)..=last.max(x)).contains(&y),
+                    "alpha {alpha}: {last} -> {y} for input {x}"
+                );
+                last = y;
+            }
+        }
     }
 
     #[test]

@@ -5,6 +5,7 @@
 
 pub mod can;
 pub mod cdf;
+pub mod compiled;
 pub mod config;
 pub mod detector;
 pub mod feature;

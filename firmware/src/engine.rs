@@ -65,6 +65,9 @@ impl ChannelMap {
     }
 }
 
+/// A detector's tick: `Detector::tick_into`, or one generated for a detector at build time.
+pub type TickFn = fn(&Detector, &mut State, Tick, &Inputs, &mut Output);
+
 /// The engine's fixed parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -158,6 +161,7 @@ fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
 /// The detector task's state and logic.
 pub struct Engine<'d> {
     detector: &'d Detector,
+    tick: TickFn,
     state: State,
     map: ChannelMap,
     receiver: Receiver,
@@ -202,7 +206,16 @@ impl<'d> Engine<'d> {
             status,
             applied_phase: None,
             inputs: Inputs::default(),
+            tick: Detector::tick_into,
         })
+    }
+
+    /// Runs the detector with `tick` from now on instead of its interpreter
+    /// (`Detector::tick_into`): the tick generated for it at build time
+    /// ([`crate::boot::tick`]), which computes the same, faster. Only for the detector it
+    /// was generated from.
+    pub fn set_tick(&mut self, tick: TickFn) {
+        self.tick = tick;
     }
 
     /// The detector this engine runs.
@@ -284,7 +297,14 @@ impl<'d> Engine<'d> {
             put(slot, controller.pos_err.and_then(|p| p.get(k).copied()));
         }
 
-        let output = self.detector.tick(&mut self.state, now, &self.inputs);
+        let mut output = Output::default();
+        (self.tick)(
+            self.detector,
+            &mut self.state,
+            now,
+            &self.inputs,
+            &mut output,
+        );
 
         let s = &mut self.status;
         s.overruns = health.overruns;

@@ -206,6 +206,8 @@ fn setup() -> Board {
         Ok(e) => ENGINE.init(e),
         Err(e) => defmt::panic!("engine: {}", e),
     };
+    // The detector is the embedded one, whose tick build.rs generated.
+    engine.set_tick(boot::tick);
     let receiver = engine.receiver();
     let shared: &'static Shared = SHARED.init_with(Shared::new);
 

@@ -1,11 +1,13 @@
 //! Host nanoseconds per detector tick for the approach configuration: the fixed-point core's
-//! `Detector::tick`, over the simulator's golden runs that the QEMU test replays too (the 13
+//! tick generated for it at build time (the firmware's, `fingertip_qemu::generated`) and its
+//! interpreter `Detector::tick_into`, over the simulator's golden runs that the QEMU test replays too (the 13
 //! Table 1 runs and one second of event-free motion, nominal parameters, seed 0, a fresh
 //! state per run).
 //!
 //! `cargo bench -p host-tests --bench tick`. Prints the fastest and the median of several
-//! timed passes over all runs for the fixed-point tick and for the f64 reference model's tick
-//! (`host_tests::reference::Model::tick`, fed the same samples unquantized), and their ratio.
+//! timed passes over all runs for the two fixed-point ticks and for the f64 reference model's
+//! tick (`host_tests::reference::Model::tick`, fed the same samples unquantized), and their
+//! ratios to the generated tick.
 //!
 //! Note the profiles: `cargo bench` builds detector-core with the workspace's release
 //! settings (opt-level "s", the firmware's), host-tests itself at opt-level 3.
@@ -13,7 +15,8 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use detector_core::{Config, Detector, Inputs, Tick};
+use detector_core::{Config, Detector, Inputs, Output, Tick};
+use fingertip_qemu::generated;
 use host_tests::reference::Model;
 use host_tests::replay::channel_columns;
 use host_tests::sim::golden_runs;
@@ -33,6 +36,9 @@ struct Segment {
 fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
     let config = Config::from_toml(host_tests::APPROACH_TOML).map_err(|e| e.to_string())?;
     let detector = Detector::build(&config).map_err(|e| e.to_string())?;
+    if fingertip_qemu::detector().map_err(|e| e.to_string())? != detector {
+        return Err("the generated tick was made from another configuration".into());
+    }
     let model = Model::new(&config).map_err(|e| e.to_string())?;
     let mut segments = Vec::new();
     let runs = golden_runs(f64::from(config.rate_hz)).map_err(|e| e.to_string())?;
@@ -64,12 +70,25 @@ fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
 type Timed<'a> = (&'static str, Box<dyn Fn(&Segment) + 'a>);
 
 fn models<'a>(detector: &'a Detector, model: &'a Model) -> Vec<Timed<'a>> {
-    let fixed: Timed = (
-        "fixed point (detector-core)",
+    let compiled: Timed = (
+        "fixed point, generated (the firmware's)",
         Box::new(move |seg: &Segment| {
             let mut state = detector.new_state();
+            let mut out = Output::default();
             for (now, inputs) in &seg.ticks {
-                black_box(detector.tick(&mut state, *now, black_box(inputs)));
+                generated::tick(detector, &mut state, *now, black_box(inputs), &mut out);
+                black_box(&out);
+            }
+        }),
+    );
+    let interpreted: Timed = (
+        "fixed point, interpreted (Detector::tick_into)",
+        Box::new(move |seg: &Segment| {
+            let mut state = detector.new_state();
+            let mut out = Output::default();
+            for (now, inputs) in &seg.ticks {
+                detector.tick_into(&mut state, *now, black_box(inputs), &mut out);
+                black_box(&out);
             }
         }),
     );
@@ -82,7 +101,7 @@ fn models<'a>(detector: &'a Detector, model: &'a Model) -> Vec<Timed<'a>> {
             }
         }),
     );
-    vec![fixed, reference]
+    vec![compiled, interpreted, reference]
 }
 
 /// ns per tick of one pass: the whole trace, repeated for at least `MIN_PASS`.
@@ -140,7 +159,7 @@ fn main() {
     }
     if let [fixed, rest @ ..] = best.as_slice() {
         for ((name, _), ns) in models.iter().skip(1).zip(rest) {
-            println!("{name} / fixed point: {:.2}x", ns / fixed);
+            println!("{name} / generated: {:.2}x", ns / fixed);
         }
     }
 }

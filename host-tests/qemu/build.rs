@@ -3,6 +3,8 @@
 //! - `config.postcard`: `configs/approach.toml`, parsed and validated with detector-core's
 //!   `std` feature, serialized with postcard (the target decodes it with the `serde`
 //!   feature alone, no TOML parser on the chip);
+//! - `tick.rs`: the detector's tick generated from it (`Detector::to_rust`), the firmware's
+//!   way of running it;
 //! - `trace.ftrc`: the inputs to replay, in the format of `src/trace.rs`: the file named by
 //!   `FINGERTIP_QEMU_TRACE` if set (the host test writes the simulator's golden runs there),
 //!   else a deterministic synthetic trace generated here;
@@ -43,6 +45,8 @@ fn main() -> Result<()> {
         return Err("the configuration does not survive a postcard round trip".into());
     }
     fs::write(out.join("config.postcard"), &bytes)?;
+    let detector = Detector::build(&config).map_err(|e| format!("{config_rel}: {e}"))?;
+    fs::write(out.join("tick.rs"), detector.to_rust())?;
     println!("cargo:rustc-env=FINGERTIP_QEMU_CONFIG_SOURCE={config_rel}");
 
     println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_TRACE");

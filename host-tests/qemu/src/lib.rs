@@ -4,6 +4,12 @@
 #![warn(missing_docs)]
 
 pub mod digest;
+/// The approach detector's tick generated at build time (`Detector::to_rust`): bit for
+/// bit the interpreter's, for the detector [`detector`] builds.
+#[allow(missing_docs, clippy::all)]
+pub mod generated {
+    include!(concat!(env!("OUT_DIR"), "/tick.rs"));
+}
 pub mod replay;
 pub mod trace;
 

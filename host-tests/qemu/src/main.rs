@@ -3,10 +3,15 @@
 //! It decodes the embedded configuration, replays the embedded trace twice and prints, over
 //! semihosting, one `key=value` line per result (the host test parses them):
 //!
-//! 1. through [`fingertip_tick`] (one call per tick, as the firmware does), timing each call;
-//! 2. through the four stage functions ([`fingertip_update_features`],
+//! 1. through [`fingertip_tick`], the tick generated for the configuration at build time
+//!    (one call per tick, as the firmware does), timing each call;
+//! 2. through its four stage functions ([`fingertip_update_features`],
 //!    [`fingertip_term_confidences`], [`fingertip_combine`], [`fingertip_decide`]), timing
-//!    each; its digest must equal the first pass's.
+//!    each;
+//! 3. through [`fingertip_tick_interpreted`], the interpreter (`Detector::tick_into`),
+//!    timing each call.
+//!
+//! The three digests must equal the one the PC computes with the interpreter.
 //!
 //! Instructions are counted with QEMU's `-icount`: the virtual clock advances exactly
 //! 2^shift ns per instruction and SysTick (25 MHz core clock) reads it, so a SysTick
@@ -30,14 +35,30 @@ mod target {
     use cortex_m_semihosting::{debug, hprintln};
     use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
     use fingertip_qemu::digest::Crc32;
+    use fingertip_qemu::generated;
     use fingertip_qemu::replay::{Position, SegmentLine, replay};
     use fingertip_qemu::trace::Trace;
     use fingertip_qemu::{CONFIG_POSTCARD, CONFIG_SOURCE, TRACE, TRACE_SOURCE};
 
-    /// One whole tick, as the firmware calls it. The root of the forbidden-helper check.
+    /// One whole tick as the firmware runs it: the tick generated for the configuration.
+    /// A root of the forbidden-helper check.
     #[unsafe(no_mangle)]
     #[inline(never)]
     pub fn fingertip_tick(
+        detector: &Detector,
+        state: &mut State,
+        now: Tick,
+        inputs: &Inputs,
+        out: &mut Output,
+    ) {
+        generated::tick(detector, state, now, inputs, out);
+    }
+
+    /// One whole tick through the interpreter, `Detector::tick_into`, for comparison. A
+    /// root of the forbidden-helper check.
+    #[unsafe(no_mangle)]
+    #[inline(never)]
+    pub fn fingertip_tick_interpreted(
         detector: &Detector,
         state: &mut State,
         now: Tick,
@@ -51,7 +72,7 @@ mod target {
     #[unsafe(no_mangle)]
     #[inline(never)]
     pub fn fingertip_update_features(detector: &Detector, state: &mut State, inputs: &Inputs) {
-        detector.update_features(state, inputs);
+        generated::update_features(detector, state, inputs);
     }
 
     /// Stage 2 alone: every term's confidence distribution function.
@@ -63,21 +84,21 @@ mod target {
         faults: ChannelMask,
         out: &mut Output,
     ) {
-        detector.term_confidences(state, faults, out);
+        generated::term_confidences(detector, state, faults, out);
     }
 
     /// Stage 3 alone: eq. 14 per event.
     #[unsafe(no_mangle)]
     #[inline(never)]
     pub fn fingertip_combine(detector: &Detector, state: &State, out: &mut Output) {
-        detector.combine(state, out);
+        generated::combine(detector, state, out);
     }
 
     /// Stage 4 alone: decision levels and onsets.
     #[unsafe(no_mangle)]
     #[inline(never)]
     pub fn fingertip_decide(detector: &Detector, state: &mut State, now: Tick, out: &mut Output) {
-        detector.decide(state, now, out);
+        generated::decide(detector, state, now, out);
     }
 
     /// Calibration: exactly `N` instructions between call and return, besides the call
@@ -313,7 +334,23 @@ mod target {
         );
         hprintln!("digest stages: {}", staged);
 
+        let mut interpreted = Stats::new();
+        let mut out = Output::default();
+        let digest = replay(
+            &detector,
+            &trace,
+            |state, now, inputs, at| {
+                let ((), c) =
+                    timed(|| fingertip_tick_interpreted(&detector, state, now, inputs, &mut out));
+                interpreted.add(meter.insns(c), at);
+                out.clone()
+            },
+            |_| {},
+        );
+        hprintln!("digest interpreted: {}", digest);
+
         tick.print("tick");
+        interpreted.print("interpreted");
         for (s, name) in
             stages
                 .iter()
