@@ -52,10 +52,11 @@ impl Detector {
             w,
             "/// Stage 1: stores the samples and updates every feature, in order.\n\
              #[inline(always)]\n\
-             pub fn update_features(detector: &Detector, state: &mut State, inputs: &Inputs) {{\n    \
-             state.load_samples(inputs, {});",
-            self.channel_names.len()
+             pub fn update_features(detector: &Detector, state: &mut State, inputs: &Inputs) {{"
         );
+        for (c, name) in self.channel_names.iter().enumerate() {
+            let _ = writeln!(w, "    state.load_sample({c}, inputs); // {name}");
+        }
         for (k, (stage, name)) in self.stages.iter().zip(&self.feature_names).enumerate() {
             // The derived `Debug` of the compiled forms (integers, booleans, arrays and
             // their variants) is a Rust expression in the generated module's scope.

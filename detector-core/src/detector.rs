@@ -137,6 +137,7 @@ impl Output {
 const _: () = assert!(
     MAX_PSI.is_power_of_two()
         && MAX_PSI <= 256
+        && MAX_CHANNELS.is_power_of_two()
         && MAX_FEATURES.is_power_of_two()
         && MAX_EVENTS.is_power_of_two()
 );
@@ -290,18 +291,12 @@ impl State {
     // them with constants. Indices are masked to their array's power-of-two length: one
     // instruction, no bounds check, no panic whatever they are.
 
-    /// Stores the first `channels` samples of `inputs` in their slots.
+    /// Stores channel `c`'s sample from `inputs` in its slot.
     #[doc(hidden)]
     #[inline(always)]
-    pub fn load_samples(&mut self, inputs: &Inputs, channels: usize) {
-        for (v, s) in self
-            .values
-            .iter_mut()
-            .zip(inputs.samples.iter())
-            .take(channels)
-        {
-            *v = s.to_bits();
-        }
+    pub fn load_sample(&mut self, c: usize, inputs: &Inputs) {
+        let c = c & (MAX_CHANNELS - 1);
+        self.values[c] = inputs.samples[c].to_bits();
     }
 
     /// Updates feature `k`, computed by `stage` of `detector`.
@@ -1030,7 +1025,9 @@ impl Detector {
     /// Stage 1: stores the samples and updates every feature, in order. Features run in
     /// every phase so they are warm when the phase changes.
     pub fn update_features(&self, state: &mut State, inputs: &Inputs) {
-        state.load_samples(inputs, self.channel_names.len());
+        for c in 0..self.channel_names.len() {
+            state.load_sample(c, inputs);
+        }
         for (k, stage) in self.stages.iter().enumerate() {
             state.step_feature(k, stage, self);
         }
