@@ -4,6 +4,7 @@ use std::fmt::Write as _;
 use std::string::String;
 
 use super::{Detector, Event};
+use crate::num::EventMask;
 
 impl Detector {
     /// Rust source of this detector's tick with its features, CDFs, weights and levels
@@ -14,9 +15,9 @@ impl Detector {
     /// same names.
     ///
     /// Given this detector, they compute bit for bit what its methods compute: they call
-    /// the same steps ([`crate::compiled`]) in the same order. Ticks with a faulty channel,
-    /// and phases without events, go through the detector's own methods. Given another
-    /// detector, the results are meaningless (but nothing panics).
+    /// the same steps ([`crate::compiled`]) in the same order, for every phase, with or
+    /// without faulty channels. Given another detector, the results are meaningless (but
+    /// nothing panics). Names appear in comments only, quoted and escaped.
     pub fn to_rust(&self) -> String {
         let mut s = String::new();
         let w = &mut s;
@@ -55,21 +56,21 @@ impl Detector {
              pub fn update_features(detector: &Detector, state: &mut State, inputs: &Inputs) {{"
         );
         for (c, name) in self.channel_names.iter().enumerate() {
-            let _ = writeln!(w, "    state.load_sample({c}, inputs); // {name}");
+            let _ = writeln!(w, "    state.load_sample({c}, inputs); // {name:?}");
         }
         for (k, (stage, name)) in self.stages.iter().zip(&self.feature_names).enumerate() {
             // The derived `Debug` of the compiled forms (integers, booleans, arrays and
             // their variants) is a Rust expression in the generated module's scope.
             let _ = writeln!(
                 w,
-                "    state.step_feature({k}, &Stage::{stage:?}, detector); // {name}"
+                "    state.step_feature({k}, &Stage::{stage:?}, detector); // {name:?}"
             );
         }
         let _ = writeln!(w, "}}\n");
     }
 
     /// The events in `mask`, in index order.
-    fn events_in(&self, mask: u8) -> impl Iterator<Item = (usize, &Event)> {
+    fn events_in(&self, mask: EventMask) -> impl Iterator<Item = (usize, &Event)> {
         self.events
             .iter()
             .enumerate()
@@ -105,7 +106,7 @@ impl Detector {
         for (p, (&mask, name)) in self.phases.iter().zip(&self.phase_names).enumerate() {
             let _ = writeln!(
                 w,
-                "        {p} => {{\n            // {name}\n            out.evaluated = {mask:#b};"
+                "        {p} => {{\n            // {name:?}\n            out.evaluated = {mask:#b};"
             );
             let psis: std::vec::Vec<(usize, &super::Psi)> = self
                 .psis
@@ -119,7 +120,7 @@ impl Detector {
                     .and_then(|f| self.feature_names.get(f))
                     .map_or("", |n| n.as_str());
                 format!(
-                    "state.eval_psi({k}, {}, &{:?}); // {feature}",
+                    "state.eval_psi({k}, {}, &{:?}); // {feature:?}",
                     psi.slot, psi.cdf
                 )
             };
@@ -153,7 +154,7 @@ impl Detector {
                 };
                 let _ = writeln!(
                     w,
-                    "            // {}\n            if faults & {:#x} != 0 {{\n                \
+                    "            // {:?}\n            if faults & {:#x} != 0 {{\n                \
                      if faults & {:#x} != 0 || ({all_faulty}) {{\n                    \
                      out.unjudgeable |= {:#b};\n                }} else if faults & {:#x} != 0 {{\n                    \
                      out.degraded |= {:#b};\n                }}\n            }}",
@@ -194,7 +195,7 @@ impl Detector {
                 };
                 let _ = writeln!(
                     w,
-                    "            // {}\n            if out.unjudgeable & {:#b} == 0 {{\n                \
+                    "            // {:?}\n            if out.unjudgeable & {:#b} == 0 {{\n                \
                      out.confidences[{i}] = eq14({product}, {sum});\n            }}",
                     self.event_name(i),
                     1u32 << i
@@ -217,7 +218,7 @@ impl Detector {
             for (i, e) in self.events_in(mask) {
                 let _ = writeln!(
                     w,
-                    "            // {}\n            if out.unjudgeable & {:#b} != 0 {{\n                \
+                    "            // {:?}\n            if out.unjudgeable & {:#b} != 0 {{\n                \
                      state.reset_event({i});\n            }} else {{\n                \
                      state.decide_event({i}, &{:?}, {}, out.confidences[{i}], now, out);\n            }}",
                     self.event_name(i),
