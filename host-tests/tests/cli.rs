@@ -221,7 +221,7 @@ fn bad_configurations_are_rejected_clearly() {
     rejects(
         &trace,
         Some(&unknown),
-        &["config.toml", "feature 'force'", "force_z"],
+        &["config.toml", "feature 'force_ac'", "force_z"],
     );
     rejects(
         &trace,
