@@ -177,7 +177,7 @@ fn use_psi(psis: &mut [Psi], k: usize, bit: EventMask) -> ChannelMask {
 
 /// A sensor term: which ψ, and its weight (Q15).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct Weighted {
+struct Weighted {
     psi: u8,
     weight: u16,
 }
