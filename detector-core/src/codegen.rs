@@ -81,28 +81,49 @@ impl Detector {
         self.event_names.get(i).map_or("", |n| n.as_str())
     }
 
-    /// Opens a stage's `match` on the active phase, one arm per phase.
-    fn open_phases(w: &mut String, doc: &str, signature: &str) {
+    /// Writes a stage's function: a `match` on the active phase whose arms `arms` writes,
+    /// and for a phase index without an arm (none that `set_phase` accepts) the detector's
+    /// own method, `fallback`.
+    fn write_stage(
+        w: &mut String,
+        doc: &str,
+        signature: &str,
+        fallback: &str,
+        arms: impl FnOnce(&mut String),
+    ) {
         let _ = writeln!(
             w,
             "/// {doc}\n#[inline(always)]\npub fn {signature} {{\n    \
              match state.phase().index() {{"
         );
+        arms(w);
+        let _ = writeln!(w, "        _ => detector.{fallback},\n    }}\n}}\n");
     }
 
-    /// Closes it: a phase index without an arm (none that `set_phase` accepts) goes to the
-    /// detector's own method, `call`.
-    fn close_phases(w: &mut String, call: &str) {
-        let _ = writeln!(w, "        _ => detector.{call},\n    }}\n}}\n");
+    /// Writes one arm per phase holding `event`'s code for each of the phase's events.
+    fn write_event_arms(&self, w: &mut String, event: impl Fn(&mut String, usize, &Event)) {
+        for (p, &mask) in self.phases.iter().enumerate() {
+            let _ = writeln!(w, "        {p} => {{");
+            for (i, e) in self.events_in(mask) {
+                let _ = writeln!(w, "            // {:?}", self.event_name(i));
+                event(w, i, e);
+            }
+            let _ = writeln!(w, "        }}");
+        }
     }
 
     fn write_term_confidences(&self, w: &mut String) {
-        Self::open_phases(
+        Self::write_stage(
             w,
             "Stage 2: the confidence of every term of the active phase's events; terms reading \
              a faulty channel get 0, and events lose their judgement as the interpreter's do.",
             "term_confidences(detector: &Detector, state: &mut State, faults: u32, out: &mut Output)",
+            "term_confidences(state, faults, out)",
+            |w| self.write_term_arms(w),
         );
+    }
+
+    fn write_term_arms(&self, w: &mut String) {
         for (p, (&mask, name)) in self.phases.iter().zip(&self.phase_names).enumerate() {
             let _ = writeln!(
                 w,
@@ -168,67 +189,60 @@ impl Detector {
             }
             let _ = writeln!(w, "        }}");
         }
-        Self::close_phases(w, "term_confidences(state, faults, out)");
     }
 
     fn write_combine(&self, w: &mut String) {
-        Self::open_phases(
+        Self::write_stage(
             w,
             "Stage 3: eq. 14 for every judgeable event of the active phase.",
             "combine(detector: &Detector, state: &State, out: &mut Output)",
+            "combine(state, out)",
+            |w| {
+                self.write_event_arms(w, |w, i, e| {
+                    let product = e.context.iter().fold(String::from("ONE"), |acc, k| {
+                        format!("product({acc}, state.psi_value({k}))")
+                    });
+                    let sum: std::vec::Vec<String> = e
+                        .sensor
+                        .iter()
+                        .map(|t| format!("{} * state.psi_value({})", t.weight, t.psi))
+                        .collect();
+                    let sum = if sum.is_empty() {
+                        String::from("0")
+                    } else {
+                        sum.join(" + ")
+                    };
+                    let _ = writeln!(
+                        w,
+                        "            if out.unjudgeable & {:#b} == 0 {{\n                \
+                         out.confidences[{i}] = eq14({product}, {sum});\n            }}",
+                        1u32 << i
+                    );
+                })
+            },
         );
-        for (p, &mask) in self.phases.iter().enumerate() {
-            let _ = writeln!(w, "        {p} => {{");
-            for (i, e) in self.events_in(mask) {
-                let product = e.context.iter().fold(String::from("ONE"), |acc, k| {
-                    format!("product({acc}, state.psi_value({k}))")
-                });
-                let sum: std::vec::Vec<String> = e
-                    .sensor
-                    .iter()
-                    .map(|t| format!("{} * state.psi_value({})", t.weight, t.psi))
-                    .collect();
-                let sum = if sum.is_empty() {
-                    String::from("0")
-                } else {
-                    sum.join(" + ")
-                };
-                let _ = writeln!(
-                    w,
-                    "            // {:?}\n            if out.unjudgeable & {:#b} == 0 {{\n                \
-                     out.confidences[{i}] = eq14({product}, {sum});\n            }}",
-                    self.event_name(i),
-                    1u32 << i
-                );
-            }
-            let _ = writeln!(w, "        }}");
-        }
-        Self::close_phases(w, "combine(state, out)");
     }
 
     fn write_decide(&self, w: &mut String) {
-        Self::open_phases(
+        Self::write_stage(
             w,
             "Stage 4: decision levels and onsets of the active phase's events; an unjudgeable \
              event has every level lowered.",
             "decide(detector: &Detector, state: &mut State, now: Tick, out: &mut Output)",
+            "decide(state, now, out)",
+            |w| {
+                self.write_event_arms(w, |w, i, e| {
+                    let _ = writeln!(
+                        w,
+                        "            if out.unjudgeable & {:#b} != 0 {{\n                \
+                         state.reset_event({i});\n            }} else {{\n                \
+                         state.decide_event({i}, &{:?}, {}, out.confidences[{i}], now, out);\n            }}",
+                        1u32 << i,
+                        e.levels,
+                        e.onset_level
+                    );
+                })
+            },
         );
-        for (p, &mask) in self.phases.iter().enumerate() {
-            let _ = writeln!(w, "        {p} => {{");
-            for (i, e) in self.events_in(mask) {
-                let _ = writeln!(
-                    w,
-                    "            // {:?}\n            if out.unjudgeable & {:#b} != 0 {{\n                \
-                     state.reset_event({i});\n            }} else {{\n                \
-                     state.decide_event({i}, &{:?}, {}, out.confidences[{i}], now, out);\n            }}",
-                    self.event_name(i),
-                    1u32 << i,
-                    e.levels,
-                    e.onset_level
-                );
-            }
-            let _ = writeln!(w, "        }}");
-        }
-        Self::close_phases(w, "decide(state, now, out)");
     }
 }

@@ -499,20 +499,14 @@ impl Stage {
         Ok(match r.u8()? {
             0 => Stage::Raw(slot(r)?),
             1 => Stage::Abs(slot(r)?),
-            2 => {
-                let (input, alpha) = (slot(r)?, r.u32()?);
-                Stage::LowPass {
-                    input,
-                    alpha: checked_alpha(alpha)?,
-                }
-            }
-            8 => {
-                let (input, alpha) = (slot(r)?, r.u32()?);
-                Stage::HighPass {
-                    input,
-                    alpha: checked_alpha(alpha)?,
-                }
-            }
+            2 => Stage::LowPass {
+                input: slot(r)?,
+                alpha: read_alpha(r)?,
+            },
+            8 => Stage::HighPass {
+                input: slot(r)?,
+                alpha: read_alpha(r)?,
+            },
             3 => {
                 let input = slot(r)?;
                 let rate = r.u32()?;
@@ -587,8 +581,9 @@ fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
     Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
 }
 
-/// A low-pass coefficient read from an image: in (0, 1) as Q31.
-fn checked_alpha(alpha: u32) -> Result<u32, ImageError> {
+/// Reads a low-pass coefficient from an image: in (0, 1) as Q31.
+fn read_alpha(r: &mut Reader<'_>) -> Result<u32, ImageError> {
+    let alpha = r.u32()?;
     if alpha == 0 || alpha >= 1 << 31 {
         return Err(ImageError::Invalid("low-pass coefficient"));
     }

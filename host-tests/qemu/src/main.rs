@@ -34,9 +34,9 @@ mod target {
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
     use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
-    use fingertip_qemu::digest::Crc32;
+    use fingertip_qemu::digest::{Crc32, Digest};
     use fingertip_qemu::generated;
-    use fingertip_qemu::replay::{Position, SegmentLine, replay};
+    use fingertip_qemu::replay::{Position, SegmentLine, SegmentReport, replay};
     use fingertip_qemu::trace::Trace;
     use fingertip_qemu::{CONFIG_POSTCARD, CONFIG_SOURCE, TRACE, TRACE_SOURCE};
 
@@ -237,6 +237,29 @@ mod target {
         }
     }
 
+    /// Replays the trace through a whole-tick function, counting each call's instructions
+    /// into `stats`.
+    fn timed_replay<'a>(
+        detector: &Detector,
+        trace: &Trace<'a>,
+        meter: &Meter,
+        tick: fn(&Detector, &mut State, Tick, &Inputs, &mut Output),
+        stats: &mut Stats,
+        on_segment: impl FnMut(&SegmentReport<'a>),
+    ) -> Digest {
+        let mut out = Output::default();
+        replay(
+            detector,
+            trace,
+            |state, now, inputs, at| {
+                let ((), c) = timed(|| tick(detector, state, now, inputs, &mut out));
+                stats.add(meter.insns(c), at);
+                out.clone()
+            },
+            on_segment,
+        )
+    }
+
     fn fail(what: &dyn core::fmt::Display) -> ! {
         hprintln!("error: {}", what);
         debug::exit(debug::EXIT_FAILURE);
@@ -291,25 +314,15 @@ mod target {
         );
 
         let mut tick = Stats::new();
-        let mut out = Output::default();
-        let digest = replay(
-            &detector,
-            &trace,
-            |state, now, inputs, at| {
-                let ((), c) = timed(|| fingertip_tick(&detector, state, now, inputs, &mut out));
-                tick.add(meter.insns(c), at);
-                out.clone()
-            },
-            |r| {
-                hprintln!(
-                    "{}",
-                    SegmentLine {
-                        report: r,
-                        detector: &detector
-                    }
-                );
-            },
-        );
+        let digest = timed_replay(&detector, &trace, &meter, fingertip_tick, &mut tick, |r| {
+            hprintln!(
+                "{}",
+                SegmentLine {
+                    report: r,
+                    detector: &detector
+                }
+            );
+        });
         hprintln!("digest tick: {}", digest);
 
         let mut stages = [Stats::new(); 5];
@@ -335,16 +348,12 @@ mod target {
         hprintln!("digest stages: {}", staged);
 
         let mut interpreted = Stats::new();
-        let mut out = Output::default();
-        let digest = replay(
+        let digest = timed_replay(
             &detector,
             &trace,
-            |state, now, inputs, at| {
-                let ((), c) =
-                    timed(|| fingertip_tick_interpreted(&detector, state, now, inputs, &mut out));
-                interpreted.add(meter.insns(c), at);
-                out.clone()
-            },
+            &meter,
+            fingertip_tick_interpreted,
+            &mut interpreted,
             |_| {},
         );
         hprintln!("digest interpreted: {}", digest);
