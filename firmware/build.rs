@@ -1,13 +1,13 @@
 //! Prepares what the firmware embeds, on the PC:
 //!
 //! - the detector configuration `configs/approach.toml` (or the file named by
-//!   `FINGERTIP_CONFIG`, relative to the workspace root), parsed and validated with the
-//!   core's `std` feature (a bad configuration fails the build with the core's message),
-//!   checked against the channels the board can feed and the sample timer's clock, and
-//!   built into a detector and written as its image (`detector.image`), which the chip
-//!   loads in place at boot, and its tick generated with the tables written in as
-//!   constants (`tick.rs`, `Detector::to_rust`), which the firmware runs;
-//! - `build_consts.rs`: the configuration's CRC-32 (reported in the status heartbeat),
+//!   `FINGERTIP_CONFIG`, relative to the workspace root), parsed and validated by
+//!   `detector_build::Generator` (a bad configuration fails the build with its message),
+//!   which writes the detector's image (`detector.image`), which the chip loads in place
+//!   at boot, and its tick with the tables written in as constants (`detector_tick.rs`,
+//!   the unit struct `ApproachTick`), which the firmware runs; the configuration is then
+//!   checked against the channels the board can feed and the sample timer's clock;
+//! - `build_consts.rs`: the detector image's CRC-32 (reported in the status heartbeat),
 //!   its source path, the sample timer's period for its rate, and the CAN node id from
 //!   `FINGERTIP_NODE_ID` (0..=15, default 0);
 //! - for the chip only: `memory.x` on the linker path and the link arguments of the
@@ -20,14 +20,11 @@ use std::fmt::Write as _;
 use std::fs;
 use std::path::PathBuf;
 
-use detector_core::{Config, Detector};
+use detector_build::{Config, Generator};
 
 #[allow(dead_code)]
 #[path = "src/wiring.rs"]
 mod wiring;
-
-#[path = "src/checksum.rs"]
-mod checksum;
 
 #[allow(dead_code)]
 #[path = "src/trigger.rs"]
@@ -45,16 +42,18 @@ fn main() -> Result<()> {
     println!("cargo:rerun-if-env-changed=FINGERTIP_CONFIG");
     println!("cargo:rerun-if-env-changed=FINGERTIP_NODE_ID");
     println!("cargo:rerun-if-changed=src/wiring.rs");
-    println!("cargo:rerun-if-changed=src/checksum.rs");
     println!("cargo:rerun-if-changed=src/trigger.rs");
 
     let config_rel = env::var("FINGERTIP_CONFIG").unwrap_or_else(|_| DEFAULT_CONFIG.into());
-    let config_path = root.join(&config_rel);
-    println!("cargo:rerun-if-changed={}", config_path.display());
-    let text = fs::read_to_string(&config_path)
-        .map_err(|e| format!("reading {}: {e}", config_path.display()))?;
-    let config = Config::from_toml(&text).map_err(|e| format!("{config_rel}: {e}"))?;
-    check_channels(&config).map_err(|e| format!("{config_rel}: {e}"))?;
+    // Validated, and written as the image the chip loads in place at boot (no
+    // configuration, no serde and no build on the chip: they would need far more stack
+    // than it has) and as the tick generated for it.
+    let generated = Generator::new(root.join(&config_rel))
+        .tick_type("ApproachTick")
+        .file_stem("detector")
+        .generate(&out)?;
+    let config = &generated.config;
+    check_channels(config).map_err(|e| format!("{config_rel}: {e}"))?;
     let period = trigger::TriggerPeriod::new(
         wiring::SAMPLE_TIMER_CLOCK_HZ,
         config.rate_hz,
@@ -68,19 +67,6 @@ fn main() -> Result<()> {
             wiring::MAX_RATE_ERROR_PPM
         )
     })?;
-
-    // The chip loads the built detector as an image, in place: no configuration, no
-    // serde and no build on the chip (they would need far more stack than it has).
-    let detector = Detector::build(&config).map_err(|e| format!("{config_rel}: {e}"))?;
-    let bytes = detector.to_image();
-    let mut back = Detector::empty();
-    back.load_image(&bytes)
-        .map_err(|e| format!("{config_rel}: the detector image does not load back: {e}"))?;
-    if back != detector {
-        return Err(format!("{config_rel}: the detector image does not load back the same").into());
-    }
-    fs::write(out.join("detector.image"), &bytes)?;
-    fs::write(out.join("tick.rs"), detector.to_rust())?;
 
     let node = match env::var("FINGERTIP_NODE_ID") {
         Ok(s) => s
@@ -100,7 +86,7 @@ fn main() -> Result<()> {
     writeln!(
         consts,
         "pub const CONFIG_CHECKSUM: u32 = {:#010x};",
-        checksum::crc32(&bytes)
+        generated.image_crc
     )?;
     writeln!(
         consts,

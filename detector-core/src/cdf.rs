@@ -14,9 +14,7 @@
 //! [`Cdf::new`] validates it and precomputes the reciprocals so that evaluating costs one
 //! 32×32→64 multiplication per shoulder and no division.
 
-#[cfg(feature = "std")]
-use crate::image::Writer;
-use crate::image::{ImageError, Reader};
+use crate::image::{ImageError, Reader, Sink};
 use crate::num::{Confidence, Signal};
 
 /// A confidence distribution function as a user describes it, parameters in the feature's
@@ -128,13 +126,12 @@ impl core::fmt::Display for CdfError {
 /// (`span` < 2¹⁷ raw) shifts the distance up by `pre` = 15, which keeps it below 2³², and
 /// uses `mul = 2³² / span`; a wide one takes the distance as it is with `mul = 2⁴⁷ / span`
 /// (at most 2³⁰). Rounding `mul` moves `t` by less than half a Q15 step.
-#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Ramp {
-    pub start: i32,
-    pub span: u32,
-    pub mul: u32,
-    pub pre: u8,
+    start: i32,
+    span: u32,
+    mul: u32,
+    pre: u8,
 }
 
 /// Spans below this are narrow (see [`Ramp`]).
@@ -193,12 +190,13 @@ fn smooth(t: u32) -> u32 {
     }
 }
 
-/// A validated confidence distribution function, ready to evaluate. (Its shape is public
-/// only for the ticks that `Detector::to_rust` (feature `std`) generates, which
-/// write the values a detector built.)
+/// A validated confidence distribution function, ready to evaluate: made by [`Cdf::new`]
+/// or read from an image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Cdf(#[doc(hidden)] pub Shape);
+pub struct Cdf(Shape);
 
+/// A compiled CDF's shape, for generated code (`detector_core::__private`), which builds a
+/// [`Cdf`] from it with [`Shape::cdf`] and its ramps with [`Ramp::checked`].
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Shape {
@@ -343,8 +341,28 @@ impl Cdf {
 }
 
 impl Ramp {
-    #[cfg(feature = "std")]
-    fn write_image(&self, w: &mut Writer) {
+    /// Whether a ramp is one [`Ramp::new`] can make: a shifted distance stays below 2³².
+    const fn valid(&self) -> bool {
+        let narrow = (self.span as u64) < NARROW;
+        self.span != 0 && self.pre == if narrow { 15 } else { 0 }
+    }
+
+    /// A ramp from its raw values, for generated code's constants: values [`Ramp::new`]
+    /// cannot make fail the build of the generated code.
+    #[doc(hidden)]
+    pub const fn checked(start: i32, span: u32, mul: u32, pre: u8) -> Ramp {
+        let ramp = Ramp {
+            start,
+            span,
+            mul,
+            pre,
+        };
+        assert!(ramp.valid(), "CDF ramp");
+        ramp
+    }
+
+    /// Appends this ramp to a detector image.
+    pub fn write_image(&self, w: &mut impl Sink) {
         w.i32(self.start);
         w.u32(self.span);
         w.u32(self.mul);
@@ -358,65 +376,138 @@ impl Ramp {
             mul: r.u32()?,
             pre: r.u8()?,
         };
-        // What `Ramp::new` can produce: a shifted distance stays below 2^32.
-        let narrow = u64::from(ramp.span) < NARROW;
-        if ramp.span == 0 || ramp.pre != if narrow { 15 } else { 0 } {
+        if !ramp.valid() {
             return Err(ImageError::Invalid("CDF ramp"));
         }
         Ok(ramp)
     }
 }
 
+impl core::fmt::Display for crate::expr::Rust<'_, Ramp> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let r = self.0;
+        write!(
+            f,
+            "Ramp::checked({}, {}, {}, {})",
+            r.start, r.span, r.mul, r.pre
+        )
+    }
+}
+
+impl Shape {
+    /// The CDF of this shape (every ramp is checked when it is made).
+    #[doc(hidden)]
+    pub const fn cdf(self) -> Cdf {
+        Cdf(self)
+    }
+}
+
+/// The tag that starts each CDF in an image.
+#[derive(Clone, Copy)]
+enum CdfTag {
+    Rising = 0,
+    Falling = 1,
+    Bell = 2,
+    FlatBell = 3,
+    Above = 4,
+    Below = 5,
+}
+
+impl CdfTag {
+    const ALL: [CdfTag; 6] = [
+        CdfTag::Rising,
+        CdfTag::Falling,
+        CdfTag::Bell,
+        CdfTag::FlatBell,
+        CdfTag::Above,
+        CdfTag::Below,
+    ];
+
+    fn from_byte(b: u8) -> Option<CdfTag> {
+        CdfTag::ALL.into_iter().find(|&t| t as u8 == b)
+    }
+}
+
+impl core::fmt::Display for crate::expr::Rust<'_, Cdf> {
+    /// The CDF as a Rust expression in generated code's scope (`detector_core::__private`).
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        use crate::expr::Rust;
+        match self.0.0 {
+            Shape::Rising(r) => write!(f, "Shape::Rising({})", Rust(&r)),
+            Shape::Falling(r) => write!(f, "Shape::Falling({})", Rust(&r)),
+            Shape::Bell { center, ramp } => write!(
+                f,
+                "Shape::Bell {{ center: {center}, ramp: {} }}",
+                Rust(&ramp)
+            ),
+            Shape::FlatBell { rise, fall } => write!(
+                f,
+                "Shape::FlatBell {{ rise: {}, fall: {} }}",
+                Rust(&rise),
+                Rust(&fall)
+            ),
+            Shape::Above(t) => write!(f, "Shape::Above({t})"),
+            Shape::Below(t) => write!(f, "Shape::Below({t})"),
+        }?;
+        write!(f, ".cdf()")
+    }
+}
+
 impl Cdf {
-    /// Appends this function to a detector image.
-    #[cfg(feature = "std")]
-    pub(crate) fn write_image(&self, w: &mut Writer) {
+    /// This CDF as a Rust expression for generated code (see
+    /// `detector_build::Compiled::to_rust`).
+    pub fn rust(&self) -> crate::expr::Rust<'_, Cdf> {
+        crate::expr::Rust(self)
+    }
+
+    /// Appends this CDF to a detector image.
+    pub fn write_image(&self, w: &mut impl Sink) {
         match self.0 {
             Shape::Rising(r) => {
-                w.u8(0);
+                w.u8(CdfTag::Rising as u8);
                 r.write_image(w);
             }
             Shape::Falling(r) => {
-                w.u8(1);
+                w.u8(CdfTag::Falling as u8);
                 r.write_image(w);
             }
             Shape::Bell { center, ramp } => {
-                w.u8(2);
+                w.u8(CdfTag::Bell as u8);
                 w.i32(center);
                 ramp.write_image(w);
             }
             Shape::FlatBell { rise, fall } => {
-                w.u8(3);
+                w.u8(CdfTag::FlatBell as u8);
                 rise.write_image(w);
                 fall.write_image(w);
             }
             Shape::Above(t) => {
-                w.u8(4);
+                w.u8(CdfTag::Above as u8);
                 w.i32(t);
             }
             Shape::Below(t) => {
-                w.u8(5);
+                w.u8(CdfTag::Below as u8);
                 w.i32(t);
             }
         }
     }
 
-    /// Reads a function from a detector image.
+    /// Reads a CDF from a detector image.
     pub(crate) fn read_image(r: &mut Reader<'_>) -> Result<Cdf, ImageError> {
-        Ok(Cdf(match r.u8()? {
-            0 => Shape::Rising(Ramp::read_image(r)?),
-            1 => Shape::Falling(Ramp::read_image(r)?),
-            2 => Shape::Bell {
+        Ok(Cdf(match CdfTag::from_byte(r.u8()?) {
+            Some(CdfTag::Rising) => Shape::Rising(Ramp::read_image(r)?),
+            Some(CdfTag::Falling) => Shape::Falling(Ramp::read_image(r)?),
+            Some(CdfTag::Bell) => Shape::Bell {
                 center: r.i32()?,
                 ramp: Ramp::read_image(r)?,
             },
-            3 => Shape::FlatBell {
+            Some(CdfTag::FlatBell) => Shape::FlatBell {
                 rise: Ramp::read_image(r)?,
                 fall: Ramp::read_image(r)?,
             },
-            4 => Shape::Above(r.i32()?),
-            5 => Shape::Below(r.i32()?),
-            _ => return Err(ImageError::Invalid("CDF shape")),
+            Some(CdfTag::Above) => Shape::Above(r.i32()?),
+            Some(CdfTag::Below) => Shape::Below(r.i32()?),
+            None => return Err(ImageError::Invalid("CDF shape")),
         }))
     }
 }

@@ -7,9 +7,7 @@
 //! saturating at the [`Signal`](crate::Signal) range, with no division.
 
 use crate::MAX_STE_WINDOW;
-#[cfg(feature = "std")]
-use crate::image::Writer;
-use crate::image::{ImageError, Reader};
+use crate::image::{ImageError, Reader, Sink};
 
 /// A window shape for the short-time energy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -79,13 +77,16 @@ pub enum StageSpec<N> {
     /// Dot product of two 2-vectors: a_x b_x + a_y b_y (e.g. force · desired velocity, in W).
     Dot {
         /// The first vector's x and y.
+        #[cfg_attr(feature = "serde", serde(deserialize_with = "exact_pair"))]
         a: [N; 2],
         /// The second vector's x and y.
+        #[cfg_attr(feature = "serde", serde(deserialize_with = "exact_pair"))]
         b: [N; 2],
     },
     /// Euclidean magnitude of a 2-vector, √(x² + y²).
     Magnitude {
         /// The vector's x and y.
+        #[cfg_attr(feature = "serde", serde(deserialize_with = "exact_pair"))]
         of: [N; 2],
     },
     /// Short-time energy (the paper's eq. 17): ζ_n = Σ_{m=0}^{N−1} x²(n−m) h(m), with the
@@ -107,6 +108,45 @@ pub enum StageSpec<N> {
 #[cfg(feature = "serde")]
 fn default_window() -> Window {
     Window::Rectangular
+}
+
+/// A 2-vector's inputs: a list of exactly two, so that a third is refused, not dropped.
+#[cfg(feature = "serde")]
+fn exact_pair<'de, D, N>(d: D) -> Result<[N; 2], D::Error>
+where
+    D: serde::Deserializer<'de>,
+    N: serde::Deserialize<'de>,
+{
+    use serde::de::{Error, IgnoredAny, SeqAccess, Visitor};
+
+    struct Pair<N>(core::marker::PhantomData<N>);
+
+    impl<'de, N: serde::Deserialize<'de>> Visitor<'de> for Pair<N> {
+        type Value = [N; 2];
+
+        fn expecting(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+            f.write_str("a list of exactly two inputs (x, y)")
+        }
+
+        fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<[N; 2], A::Error> {
+            let x = seq
+                .next_element()?
+                .ok_or_else(|| A::Error::invalid_length(0, &self))?;
+            let y = seq
+                .next_element()?
+                .ok_or_else(|| A::Error::invalid_length(1, &self))?;
+            let mut n = 2;
+            while seq.next_element::<IgnoredAny>()?.is_some() {
+                n += 1;
+            }
+            if n > 2 {
+                return Err(A::Error::invalid_length(n, &self));
+            }
+            Ok([x, y])
+        }
+    }
+
+    d.deserialize_seq(Pair(core::marker::PhantomData))
 }
 
 impl<N> StageSpec<N> {
@@ -211,7 +251,7 @@ impl core::fmt::Display for StageError {
 }
 
 /// Slots a stage can read: the channels, then the features.
-pub(crate) const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
+pub const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
 
 /// Samples of STE history the detector holds for all its STE features together.
 pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
@@ -220,12 +260,17 @@ pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
 // instruction, no bounds check.
 const _: () = assert!(MAX_SLOTS.is_power_of_two() && STE_POOL.is_power_of_two());
 
-/// A compiled stage: input slots and precomputed coefficients. Public for the ticks that
-/// `Detector::to_rust` (feature `std`) generates, which write the values a
-/// detector built; other values are not supported.
+/// A compiled feature stage: input slots and precomputed coefficients, made by
+/// [`Stage::compile`] or read from an image, so always within the ranges the tick relies
+/// on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Stage(StageKind);
+
+/// A compiled stage's kind and values, for generated code (`detector_core::__private`),
+/// which builds a [`Stage`] from them through a `const fn` that checks them.
 #[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Stage {
+pub enum StageKind {
     Raw(u8),
     Abs(u8),
     /// `alpha` is α in Q31.
@@ -233,7 +278,7 @@ pub enum Stage {
         input: u8,
         alpha: u32,
     },
-    /// The input minus its low-pass, `alpha` as for [`Stage::LowPass`].
+    /// The input minus its low-pass, `alpha` as for [`StageKind::LowPass`].
     HighPass {
         input: u8,
         alpha: u32,
@@ -274,30 +319,30 @@ impl Stage {
     /// Compiles a stage whose inputs are already resolved to slots. `pool_used` is the STE
     /// history taken by earlier features and grows by this feature's window; tapered
     /// window weights are written into `weights`.
-    pub(crate) fn compile(
+    pub fn compile(
         spec: &StageSpec<u8>,
         rate_hz: f32,
         pool_used: &mut usize,
         weights: &mut [u32; STE_POOL],
     ) -> Result<Stage, StageError> {
-        Ok(match *spec {
-            StageSpec::Raw { input } => Stage::Raw(input),
-            StageSpec::Abs { input } => Stage::Abs(input),
-            StageSpec::LowPass { input, cutoff_hz } => Stage::LowPass {
+        Ok(Stage(match *spec {
+            StageSpec::Raw { input } => StageKind::Raw(input),
+            StageSpec::Abs { input } => StageKind::Abs(input),
+            StageSpec::LowPass { input, cutoff_hz } => StageKind::LowPass {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
             },
-            StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
+            StageSpec::HighPass { input, cutoff_hz } => StageKind::HighPass {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
             },
-            StageSpec::Rate { input } => Stage::Rate {
+            StageSpec::Rate { input } => StageKind::Rate {
                 input,
                 rate: (rate_hz * 256.0 + 0.5) as u32,
             },
-            StageSpec::Difference { a, b } => Stage::Difference(a, b),
-            StageSpec::Dot { a, b } => Stage::Dot([a[0], a[1], b[0], b[1]]),
-            StageSpec::Magnitude { of } => Stage::Magnitude(of[0], of[1]),
+            StageSpec::Difference { a, b } => StageKind::Difference(a, b),
+            StageSpec::Dot { a, b } => StageKind::Dot([a[0], a[1], b[0], b[1]]),
+            StageSpec::Magnitude { of } => StageKind::Magnitude(of[0], of[1]),
             StageSpec::Ste {
                 input,
                 window,
@@ -320,7 +365,7 @@ impl Stage {
                         true
                     }
                 };
-                Stage::Ste {
+                StageKind::Ste {
                     input,
                     offset: offset as u16,
                     len: window,
@@ -328,7 +373,7 @@ impl Stage {
                     tapered,
                 }
             }
-        })
+        }))
     }
 
     /// Feeds one tick: reads input slots from `values`, returns the feature's new value.
@@ -339,20 +384,20 @@ impl Stage {
         st: &mut StageState,
         values: &[i32; MAX_SLOTS],
         ring: &mut [u64; STE_POOL],
-        weights: &[u32; STE_POOL],
+        weights: &[u32],
     ) -> i32 {
         // Slots are validated below MAX_SLOTS, a power of two: masking keeps every access
         // in bounds for one instruction.
         let get = |slot: u8| values[usize::from(slot) & (MAX_SLOTS - 1)];
-        match *self {
-            Stage::Raw(i) => get(i),
-            Stage::Abs(i) => get(i).saturating_abs(),
-            Stage::LowPass { input, alpha } => low_pass(st, get(input), alpha),
-            Stage::HighPass { input, alpha } => {
+        match self.0 {
+            StageKind::Raw(i) => get(i),
+            StageKind::Abs(i) => get(i).saturating_abs(),
+            StageKind::LowPass { input, alpha } => low_pass(st, get(input), alpha),
+            StageKind::HighPass { input, alpha } => {
                 let x = get(input);
                 x.saturating_sub(low_pass(st, x, alpha))
             }
-            Stage::Rate { input, rate } => {
+            StageKind::Rate { input, rate } => {
                 let x = get(input);
                 let out = if st.primed {
                     // |d| < 2^32 and rate < 2^24, so the product fits.
@@ -365,18 +410,18 @@ impl Stage {
                 st.prev = x;
                 out
             }
-            Stage::Difference(a, b) => get(a).saturating_sub(get(b)),
-            Stage::Dot([ax, ay, bx, by]) => {
+            StageKind::Difference(a, b) => get(a).saturating_sub(get(b)),
+            StageKind::Dot([ax, ay, bx, by]) => {
                 let p = i64::from(get(ax)) * i64::from(get(bx));
                 let q = i64::from(get(ay)) * i64::from(get(by));
                 sat32(p.saturating_add(q) >> 16)
             }
-            Stage::Magnitude(x, y) => {
+            StageKind::Magnitude(x, y) => {
                 let (x, y) = (i64::from(get(x)), i64::from(get(y)));
                 let s = (x * x) as u64 + (y * y) as u64;
                 isqrt64(s).min(i32::MAX as u32) as i32
             }
-            Stage::Ste {
+            StageKind::Ste {
                 input,
                 offset,
                 len,
@@ -435,55 +480,54 @@ impl Stage {
 const STE_INPUT_LIMIT: i64 = 2048 << 16;
 
 impl Stage {
-    /// Appends this stage to a detector image.
-    #[cfg(feature = "std")]
-    pub(crate) fn write_image(&self, w: &mut Writer) {
-        match *self {
-            Stage::Raw(i) => {
-                w.u8(0);
+    /// Appends this item to a detector image.
+    pub fn write_image(&self, w: &mut impl Sink) {
+        match self.0 {
+            StageKind::Raw(i) => {
+                w.u8(StageTag::Raw as u8);
                 w.u8(i);
             }
-            Stage::Abs(i) => {
-                w.u8(1);
+            StageKind::Abs(i) => {
+                w.u8(StageTag::Abs as u8);
                 w.u8(i);
             }
-            Stage::LowPass { input, alpha } => {
-                w.u8(2);
+            StageKind::LowPass { input, alpha } => {
+                w.u8(StageTag::LowPass as u8);
                 w.u8(input);
                 w.u32(alpha);
             }
-            Stage::HighPass { input, alpha } => {
-                w.u8(8);
+            StageKind::HighPass { input, alpha } => {
+                w.u8(StageTag::HighPass as u8);
                 w.u8(input);
                 w.u32(alpha);
             }
-            Stage::Rate { input, rate } => {
-                w.u8(3);
+            StageKind::Rate { input, rate } => {
+                w.u8(StageTag::Rate as u8);
                 w.u8(input);
                 w.u32(rate);
             }
-            Stage::Difference(a, b) => {
-                w.u8(4);
+            StageKind::Difference(a, b) => {
+                w.u8(StageTag::Difference as u8);
                 w.u8(a);
                 w.u8(b);
             }
-            Stage::Dot(s) => {
-                w.u8(5);
+            StageKind::Dot(s) => {
+                w.u8(StageTag::Dot as u8);
                 s.iter().for_each(|&i| w.u8(i));
             }
-            Stage::Magnitude(x, y) => {
-                w.u8(6);
+            StageKind::Magnitude(x, y) => {
+                w.u8(StageTag::Magnitude as u8);
                 w.u8(x);
                 w.u8(y);
             }
-            Stage::Ste {
+            StageKind::Ste {
                 input,
                 offset,
                 len,
                 recip,
                 tapered,
             } => {
-                w.u8(7);
+                w.u8(StageTag::Ste as u8);
                 w.u8(input);
                 w.u16(offset);
                 w.u16(len);
@@ -495,62 +539,189 @@ impl Stage {
 
     /// Reads a stage from a detector image; inputs must be below `slots`.
     pub(crate) fn read_image(r: &mut Reader<'_>, slots: usize) -> Result<Stage, ImageError> {
-        let slot = |r: &mut Reader<'_>| r.below(slots, "feature input");
-        Ok(match r.u8()? {
-            0 => Stage::Raw(slot(r)?),
-            1 => Stage::Abs(slot(r)?),
-            2 => Stage::LowPass {
-                input: slot(r)?,
-                alpha: read_alpha(r)?,
+        let kind = match StageTag::from_byte(r.u8()?) {
+            Some(StageTag::Raw) => StageKind::Raw(r.u8()?),
+            Some(StageTag::Abs) => StageKind::Abs(r.u8()?),
+            Some(StageTag::LowPass) => StageKind::LowPass {
+                input: r.u8()?,
+                alpha: r.u32()?,
             },
-            8 => Stage::HighPass {
-                input: slot(r)?,
-                alpha: read_alpha(r)?,
+            Some(StageTag::HighPass) => StageKind::HighPass {
+                input: r.u8()?,
+                alpha: r.u32()?,
             },
-            3 => {
-                let input = slot(r)?;
-                let rate = r.u32()?;
-                if rate >= 1 << 24 {
-                    return Err(ImageError::Invalid("rate"));
-                }
-                Stage::Rate { input, rate }
-            }
-            4 => Stage::Difference(slot(r)?, slot(r)?),
-            5 => Stage::Dot([slot(r)?, slot(r)?, slot(r)?, slot(r)?]),
-            6 => Stage::Magnitude(slot(r)?, slot(r)?),
-            7 => {
-                let input = slot(r)?;
+            Some(StageTag::Rate) => StageKind::Rate {
+                input: r.u8()?,
+                rate: r.u32()?,
+            },
+            Some(StageTag::Difference) => StageKind::Difference(r.u8()?, r.u8()?),
+            Some(StageTag::Dot) => StageKind::Dot([r.u8()?, r.u8()?, r.u8()?, r.u8()?]),
+            Some(StageTag::Magnitude) => StageKind::Magnitude(r.u8()?, r.u8()?),
+            Some(StageTag::Ste) => {
+                let input = r.u8()?;
                 let (offset, len) = (r.u16()?, r.u16()?);
-                let (recip, tapered) = (r.u32()?, r.u8()?);
-                let end = usize::from(offset) + usize::from(len);
-                // recip · N ≤ 2^24 (plus rounding) keeps the running sum's product in 64 bits.
-                let scaled = u64::from(recip) * u64::from(len);
-                if len == 0
-                    || usize::from(len) > MAX_STE_WINDOW
-                    || end > STE_POOL
-                    || scaled > (1 << 24) + u64::from(len)
-                    || tapered > 1
-                {
-                    return Err(ImageError::Invalid("STE window"));
-                }
-                Stage::Ste {
+                let recip = r.u32()?;
+                let tapered = match r.u8()? {
+                    0 => false,
+                    1 => true,
+                    _ => return Err(ImageError::Invalid("STE window")),
+                };
+                StageKind::Ste {
                     input,
                     offset,
                     len,
                     recip,
-                    tapered: tapered == 1,
+                    tapered,
                 }
             }
-            _ => return Err(ImageError::Invalid("feature kind")),
-        })
+            None => return Err(ImageError::Invalid("feature kind")),
+        };
+        match kind.invalid(slots) {
+            Some(what) => Err(ImageError::Invalid(what)),
+            None => Ok(Stage(kind)),
+        }
+    }
+}
+
+impl StageKind {
+    /// What is out of range, if anything, for a stage that may read slots below `slots`:
+    /// the one statement of what [`Stage::compile`] can produce, checked by the image
+    /// loader and, at compile time, by generated code's constants.
+    pub(crate) const fn invalid(&self, slots: usize) -> Option<&'static str> {
+        let inputs_ok = match *self {
+            StageKind::Raw(i)
+            | StageKind::Abs(i)
+            | StageKind::LowPass { input: i, .. }
+            | StageKind::HighPass { input: i, .. }
+            | StageKind::Rate { input: i, .. }
+            | StageKind::Ste { input: i, .. } => (i as usize) < slots,
+            StageKind::Difference(a, b) | StageKind::Magnitude(a, b) => {
+                (a as usize) < slots && (b as usize) < slots
+            }
+            StageKind::Dot([a, b, c, d]) => {
+                (a as usize) < slots
+                    && (b as usize) < slots
+                    && (c as usize) < slots
+                    && (d as usize) < slots
+            }
+        };
+        if !inputs_ok {
+            return Some("feature input");
+        }
+        match *self {
+            StageKind::LowPass { alpha, .. } | StageKind::HighPass { alpha, .. }
+                if alpha == 0 || alpha >= 1 << 31 =>
+            {
+                Some("low-pass coefficient")
+            }
+            StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
+            StageKind::Ste {
+                offset, len, recip, ..
+            } => {
+                let end = offset as usize + len as usize;
+                // recip · N ≤ 2^24 (plus rounding) keeps the running sum's product in 64 bits.
+                let scaled = recip as u64 * len as u64;
+                if len == 0
+                    || len as usize > MAX_STE_WINDOW
+                    || end > STE_POOL
+                    || scaled > (1 << 24) + len as u64
+                {
+                    Some("STE window")
+                } else {
+                    None
+                }
+            }
+            _ => None,
+        }
+    }
+
+    /// A checked stage, for generated code's constants: a value [`Stage::compile`] cannot
+    /// make fails the build of the generated code.
+    pub const fn checked(self) -> Stage {
+        if let Some(what) = self.invalid(MAX_SLOTS) {
+            panic!("{}", what);
+        }
+        Stage(self)
+    }
+}
+
+/// The tag that starts each stage in an image.
+#[derive(Clone, Copy)]
+enum StageTag {
+    Raw = 0,
+    Abs = 1,
+    LowPass = 2,
+    Rate = 3,
+    Difference = 4,
+    Dot = 5,
+    Magnitude = 6,
+    Ste = 7,
+    HighPass = 8,
+}
+
+impl StageTag {
+    const ALL: [StageTag; 9] = [
+        StageTag::Raw,
+        StageTag::Abs,
+        StageTag::LowPass,
+        StageTag::Rate,
+        StageTag::Difference,
+        StageTag::Dot,
+        StageTag::Magnitude,
+        StageTag::Ste,
+        StageTag::HighPass,
+    ];
+
+    fn from_byte(b: u8) -> Option<StageTag> {
+        StageTag::ALL.into_iter().find(|&t| t as u8 == b)
+    }
+}
+
+impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
+    /// The stage as a Rust expression in generated code's scope (`detector_core::__private`).
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "StageKind::")?;
+        match self.0.0 {
+            StageKind::Raw(i) => write!(f, "Raw({i})"),
+            StageKind::Abs(i) => write!(f, "Abs({i})"),
+            StageKind::LowPass { input, alpha } => {
+                write!(f, "LowPass {{ input: {input}, alpha: {alpha} }}")
+            }
+            StageKind::HighPass { input, alpha } => {
+                write!(f, "HighPass {{ input: {input}, alpha: {alpha} }}")
+            }
+            StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
+            StageKind::Difference(a, b) => write!(f, "Difference({a}, {b})"),
+            StageKind::Dot([a, b, c, d]) => write!(f, "Dot([{a}, {b}, {c}, {d}])"),
+            StageKind::Magnitude(a, b) => write!(f, "Magnitude({a}, {b})"),
+            StageKind::Ste {
+                input,
+                offset,
+                len,
+                recip,
+                tapered,
+            } => write!(
+                f,
+                "Ste {{ input: {input}, offset: {offset}, len: {len}, recip: {recip}, tapered: {tapered} }}"
+            ),
+        }?;
+        write!(f, ".checked()")
+    }
+}
+
+impl Stage {
+    /// This stage as a Rust expression for generated code (see
+    /// `detector_build::Compiled::to_rust`).
+    pub fn rust(&self) -> crate::expr::Rust<'_, Stage> {
+        crate::expr::Rust(self)
     }
 }
 
 /// Whether a stage's window taps in `weights` are what [`Stage::compile`] makes: a
 /// tapered window's sum exactly 2²⁴, which keeps its weighted sum in 64 bits.
 pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; STE_POOL]) -> bool {
-    match *stage {
-        Stage::Ste {
+    match stage.0 {
+        StageKind::Ste {
             offset,
             len,
             tapered: true,
@@ -579,15 +750,6 @@ fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
     // relative 6·10⁻⁸, far below the filter's other errors.
     let alpha = (alpha * 2_147_483_648.0) as u64;
     Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
-}
-
-/// Reads a low-pass coefficient from an image: in (0, 1) as Q31.
-fn read_alpha(r: &mut Reader<'_>) -> Result<u32, ImageError> {
-    let alpha = r.u32()?;
-    if alpha == 0 || alpha >= 1 << 31 {
-        return Err(ImageError::Invalid("low-pass coefficient"));
-    }
-    Ok(alpha)
 }
 
 /// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The

@@ -1,20 +1,84 @@
-//! A built detector as bytes: made on the PC (`Detector::to_image`, `std`), loaded
+//! A detector as bytes: written on the PC by `detector-build` (`Compiled::image`), loaded
 //! on the chip in place ([`crate::Detector::load_image`]) with a small stack frame, no
-//! serde and no configuration parsing. The firmware embeds the image of
-//! `configs/approach.toml` that its build script made, so the chip never holds a
-//! [`crate::Config`].
+//! serde and no configuration parsing. The firmware embeds the image its build script
+//! made, so the chip never holds a configuration.
 //!
-//! Layout, little-endian: the magic `FTD2`, the detector rate (f32), then each list as a
-//! one-byte count followed by its items (channels: name, scale; features: name, stage;
-//! the distinct (feature, CDF) pairs; events: name, terms as indices into those pairs,
-//! levels; phases: name, event mask), and the slot dependency masks and STE window taps as
-//! fixed arrays. Loading checks every count, index, shift and
-//! level, so a corrupt image is rejected rather than run.
+//! # Layout
+//!
+//! Little-endian. The magic [`MAGIC`] (`FTD3`, the digit is the layout's version), then
+//! each [`Section`] in [`Section::ORDER`], each opened by its tag byte:
+//!
+//! | section | tag | contents |
+//! |---|---|---|
+//! | [`Section::Rate`] | 1 | the detector rate in Hz (`f32`) |
+//! | [`Section::Channels`] | 2 | a count, then per channel: name, scale (`f32`) |
+//! | [`Section::Features`] | 3 | a count, then per feature: name, stage (its kind's tag, then its values) |
+//! | [`Section::SlotChannels`] | 4 | per slot (channels, then features): the channels it depends on (`u32` mask) |
+//! | [`Section::Taps`] | 5 | the STE window taps (`u32`, Q24), [`crate::feature::STE_POOL`] of them |
+//! | [`Section::Terms`] | 6 | a count, then per distinct (feature, CDF) pair: the slot, the CDF (its shape's tag, then its values) |
+//! | [`Section::Events`] | 7 | a count, then per event: name, context terms (count, pair indices), sensor terms (count, pair index and Q15 weight each), alert and confirm levels (on, off, dwell: `u16`), onset level (`u16`) |
+//! | [`Section::Phases`] | 8 | a count, then per phase: name, event mask (`u8`) |
+//!
+//! A name is its length (`u8`) and its UTF-8 bytes; a count is one byte. Each compiled item
+//! (stage, CDF, decision level) writes and reads itself next to the checks it must pass.
+//! Loading checks every tag, count, index, shift and level, so a corrupt image is
+//! rejected rather than run.
 
-use crate::config::Name;
+use crate::Name;
 
 /// The first four bytes of every image (the digit is the layout's version).
-pub(crate) const MAGIC: [u8; 4] = *b"FTD2";
+pub const MAGIC: [u8; 4] = *b"FTD3";
+
+/// An image's sections, each opened by its tag byte (the discriminant), in
+/// [`Section::ORDER`]: the one statement of the layout that the writer and the loader both
+/// walk.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Section {
+    /// The detector rate.
+    Rate = 1,
+    /// The input channels and their scales.
+    Channels = 2,
+    /// The features' names and compiled stages.
+    Features = 3,
+    /// The channels each slot depends on.
+    SlotChannels = 4,
+    /// The tapered STE windows' taps.
+    Taps = 5,
+    /// The distinct (feature, CDF) pairs the events' terms judge.
+    Terms = 6,
+    /// The events: terms, weights, decision levels.
+    Events = 7,
+    /// The phases and their events.
+    Phases = 8,
+}
+
+impl Section {
+    /// The sections in the order an image holds them.
+    pub const ORDER: [Section; 8] = [
+        Section::Rate,
+        Section::Channels,
+        Section::Features,
+        Section::SlotChannels,
+        Section::Taps,
+        Section::Terms,
+        Section::Events,
+        Section::Phases,
+    ];
+
+    /// The section's name, for errors.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Section::Rate => "rate",
+            Section::Channels => "channels",
+            Section::Features => "features",
+            Section::SlotChannels => "slot channels",
+            Section::Taps => "STE taps",
+            Section::Terms => "terms",
+            Section::Events => "events",
+            Section::Phases => "phases",
+        }
+    }
+}
 
 /// Why an image was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -29,6 +93,8 @@ pub enum ImageError {
     TrailingBytes,
     /// A value is out of its range; names which.
     Invalid(&'static str),
+    /// The tag of this section is missing where the layout puts it.
+    Section(&'static str),
 }
 
 impl core::fmt::Display for ImageError {
@@ -38,6 +104,9 @@ impl core::fmt::Display for ImageError {
             ImageError::Truncated => write!(f, "the image is truncated"),
             ImageError::TrailingBytes => write!(f, "bytes follow the image's end"),
             ImageError::Invalid(what) => write!(f, "the image's {what} is out of range"),
+            ImageError::Section(what) => {
+                write!(f, "the image's {what} section is missing or out of place")
+            }
         }
     }
 }
@@ -123,6 +192,15 @@ impl<'a> Reader<'a> {
         }
     }
 
+    /// The tag that opens `section`.
+    pub(crate) fn section(&mut self, section: Section) -> Result<(), ImageError> {
+        if self.u8()? == section as u8 {
+            Ok(())
+        } else {
+            Err(ImageError::Section(section.name()))
+        }
+    }
+
     pub(crate) fn finish(&self) -> Result<(), ImageError> {
         if self.bytes.is_empty() {
             Ok(())
@@ -132,40 +210,51 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// Writes an image (PC side).
-#[cfg(feature = "std")]
-#[derive(Default)]
-pub(crate) struct Writer(pub(crate) std::vec::Vec<u8>);
+/// Where an image is written, a value at a time, in the layout the loader reads: the
+/// build side gives a byte buffer. Each compiled item (stage, CDF, ramp) writes itself
+/// through it, next to the code that reads it back.
+pub trait Sink {
+    /// Appends raw bytes.
+    fn put(&mut self, bytes: &[u8]);
 
-#[cfg(feature = "std")]
-impl Writer {
-    pub(crate) fn u8(&mut self, v: u8) {
-        self.0.push(v);
+    /// Appends a byte.
+    fn u8(&mut self, v: u8) {
+        self.put(&[v]);
     }
 
-    pub(crate) fn u16(&mut self, v: u16) {
-        self.0.extend_from_slice(&v.to_le_bytes());
+    /// Appends a little-endian `u16`.
+    fn u16(&mut self, v: u16) {
+        self.put(&v.to_le_bytes());
     }
 
-    pub(crate) fn u32(&mut self, v: u32) {
-        self.0.extend_from_slice(&v.to_le_bytes());
+    /// Appends a little-endian `u32`.
+    fn u32(&mut self, v: u32) {
+        self.put(&v.to_le_bytes());
     }
 
-    pub(crate) fn i32(&mut self, v: i32) {
-        self.0.extend_from_slice(&v.to_le_bytes());
+    /// Appends a little-endian `i32`.
+    fn i32(&mut self, v: i32) {
+        self.put(&v.to_le_bytes());
     }
 
-    pub(crate) fn f32(&mut self, v: f32) {
-        self.0.extend_from_slice(&v.to_le_bytes());
+    /// Appends a little-endian `f32`.
+    fn f32(&mut self, v: f32) {
+        self.put(&v.to_le_bytes());
     }
 
-    /// A list's length: lists are bounded by the crate's capacities, all below 256.
-    pub(crate) fn count(&mut self, n: usize) {
+    /// Appends a list's length: lists are bounded by the crate's capacities, all below 256.
+    fn count(&mut self, n: usize) {
         self.u8(n as u8);
     }
 
-    pub(crate) fn name(&mut self, n: &Name) {
+    /// Appends the tag that opens `section`.
+    fn section(&mut self, section: Section) {
+        self.u8(section as u8);
+    }
+
+    /// Appends a name: its length, then its bytes.
+    fn name(&mut self, n: &Name) {
         self.count(n.len());
-        self.0.extend_from_slice(n.as_bytes());
+        self.put(n.as_bytes());
     }
 }

@@ -1,30 +1,31 @@
 #![doc = include_str!("../README.md")]
-#![cfg_attr(not(any(test, feature = "std")), no_std)]
+#![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-pub mod can;
 pub mod cdf;
-pub mod compiled;
-pub mod config;
 pub mod detector;
+mod expr;
 pub mod feature;
 pub mod image;
 pub mod num;
+pub mod state;
+mod tick;
+
+#[doc(hidden)]
+#[path = "private.rs"]
+pub mod __private;
 
 pub use cdf::{Cdf, CdfError, CdfSpec};
-#[cfg(feature = "std")]
-pub use config::LoadError;
-pub use config::{
-    ChannelSpec, Config, ConfigError, ContextTerm, EventSpec, FeatureSpec, Item, LevelSpec, Name,
-    PhaseSpec, Problem, SensorTerm,
-};
-pub use detector::{
-    Decision, Detector, EventId, Inputs, Level, Output, PhaseId, State, TermConfidences,
-};
-pub use feature::{StageError, StageSpec, Window};
-pub use image::ImageError;
+pub use detector::{Detector, TermConfidences};
+pub use feature::{Stage, StageError, StageSpec, Window};
+pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
+pub use state::{Decision, EventId, Inputs, Level, LevelParams, Output, PhaseId, State};
+pub use tick::DetectorTick;
+
+/// A name of a channel, feature, event or phase: 1 to [`NAME_LEN`] bytes.
+pub type Name = heapless::String<NAME_LEN>;
 
 /// Most input channels a configuration may declare.
 pub const MAX_CHANNELS: usize = 16;

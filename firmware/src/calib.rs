@@ -7,11 +7,12 @@
 //! ([`crate::tmp117`]). Without a temperature (sensor not answering) the zero holds its
 //! last compensated value.
 //!
-//! Fixed point, no division: the gain is Q24 units per count, the zero Q8 counts. One
-//! 32×32→64 multiply per sample (a single `SMULL` on the Cortex-M4). Results saturate at
-//! the ends of the [`Signal`] range.
+//! Fixed point, no division: the gain is Q24 units per count ([`I8F24`]), the zero and its
+//! drift Q8 counts ([`I24F8`]). One 32×32→64 multiply per sample (a single `SMULL` on the
+//! Cortex-M4). Results saturate at the ends of the [`Signal`] range.
 
 use detector_core::Signal;
+use fixed::types::{I8F24, I24F8};
 
 use crate::wiring::ADC_CHANNELS;
 
@@ -57,12 +58,12 @@ impl core::fmt::Display for CalibrationError {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Calibration {
-    /// Units per count, Q24 (2⁻²⁴ units per count resolution, |gain| < 128).
-    gain_q24: i32,
-    /// Counts at zero of the quantity at the reference temperature, Q8.
-    zero_q8: i32,
-    /// Zero drift, Q8 counts per °C.
-    drift_q8: i32,
+    /// Units per count (2⁻²⁴ units per count resolution, |gain| < 128).
+    gain: I8F24,
+    /// Counts at zero of the quantity at the reference temperature.
+    zero: I24F8,
+    /// Zero drift, counts per °C.
+    drift: I24F8,
     /// The reference temperature, °C.
     t_ref: Signal,
 }
@@ -96,9 +97,9 @@ impl Calibration {
             return Err(CalibrationError::Reference(t_ref));
         }
         Ok(Calibration {
-            gain_q24: round(g) as i32,
-            zero_q8: round(zero * 256.0) as i32,
-            drift_q8: round(drift * 256.0) as i32,
+            gain: I8F24::from_bits(round(g) as i32),
+            zero: I24F8::from_bits(round(zero * 256.0) as i32),
+            drift: I24F8::from_bits(round(drift * 256.0) as i32),
             t_ref: Signal::from_bits(round(t_ref * 65_536.0) as i32),
         })
     }
@@ -111,26 +112,26 @@ impl Calibration {
                 // Q8 counts/°C × Q16 °C = Q24 counts; back to Q8. i64: |drift| ≤ 2^18,
                 // |ΔT| < 2^32.
                 let dt = i64::from(t.to_bits()) - i64::from(self.t_ref.to_bits());
-                (i64::from(self.drift_q8) * dt) >> 16
+                (i64::from(self.drift.to_bits()) * dt) >> 16
             }
             None => 0,
         };
-        let zero =
-            (i64::from(self.zero_q8) + shift).clamp(i64::from(i32::MIN), i64::from(i32::MAX));
+        let zero = (i64::from(self.zero.to_bits()) + shift)
+            .clamp(i64::from(i32::MIN), i64::from(i32::MAX));
         ActiveCalibration {
-            gain_q24: self.gain_q24,
-            zero_q8: zero as i32,
+            gain: self.gain,
+            zero: I24F8::from_bits(zero as i32),
         }
     }
 
     /// The gain, units per count.
     pub fn gain(&self) -> f64 {
-        f64::from(self.gain_q24) / 16_777_216.0
+        f64::from(self.gain.to_bits()) / 16_777_216.0
     }
 
     /// The zero at the reference temperature, counts.
     pub fn zero(&self) -> f64 {
-        f64::from(self.zero_q8) / 256.0
+        f64::from(self.zero.to_bits()) / 256.0
     }
 }
 
@@ -139,8 +140,10 @@ impl Calibration {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ActiveCalibration {
-    gain_q24: i32,
-    zero_q8: i32,
+    /// Units per count.
+    gain: I8F24,
+    /// Counts at zero of the quantity, compensated.
+    zero: I24F8,
 }
 
 impl ActiveCalibration {
@@ -150,8 +153,8 @@ impl ActiveCalibration {
     #[inline]
     pub fn apply(&self, counts: u16) -> Signal {
         // Q8 counts × Q24 units/count = Q32 units; >> 16 gives Signal's Q16.
-        let diff = (i64::from(counts) << 8) - i64::from(self.zero_q8);
-        let q32 = diff * i64::from(self.gain_q24);
+        let diff = (i64::from(counts) << 8) - i64::from(self.zero.to_bits());
+        let q32 = diff * i64::from(self.gain.to_bits());
         // Round to nearest: add half an LSB of the result before the shift.
         let q16 = (q32 + (1 << 15)) >> 16;
         Signal::from_bits(q16.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32)
@@ -189,7 +192,7 @@ mod tests {
     use proptest::prelude::*;
 
     fn reference(c: &Calibration, t: Option<f64>, counts: u16) -> f64 {
-        let drift = f64::from(c.drift_q8) / 256.0;
+        let drift = f64::from(c.drift.to_bits()) / 256.0;
         let t_ref = c.t_ref.to_f64();
         let zero = c.zero() + t.map_or(0.0, |t| drift * (t - t_ref));
         (f64::from(counts) - zero) * c.gain()

@@ -1,11 +1,12 @@
 //! The configuration checksum: CRC-32/ISO-HDLC (the CRC of zlib, Ethernet and PNG), so a
 //! PC tool can check the value in the status heartbeat with `zlib.crc32(image)` of the
-//! detector image that `Detector::to_image` makes.
+//! detector image `detector-build` writes (`detector_build::image_crc` is the same).
 //!
-//! Shared, as source, by the lib and by `build.rs`, which computes it at build time.
+//! The board computes it over the image it loads at boot, and the engine checks it
+//! against the image the generated tick was made from.
 
-/// Without a lookup table: it runs once per build and in a test, never in the tick, and
-/// the table would cost 1 KiB of flash.
+/// Without a lookup table: it runs once per boot, never in the tick, and the table would
+/// cost 1 KiB of flash.
 const CRC32: crc::Crc<u32, crc::NoTable> =
     crc::Crc::<u32, crc::NoTable>::new(&crc::CRC_32_ISO_HDLC);
 

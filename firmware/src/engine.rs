@@ -2,24 +2,25 @@
 //! the newest analog sample with the controller's context (withheld and flagged faulty
 //! when stale), follow the controller's phase, run the core, keep the status, and turn
 //! the output into CAN frames (events at once, the decimated confidence stream, the
-//! heartbeat) with the core's transmitter.
+//! heartbeat) with the protocol's transmitter (`fingertip_can`).
+//!
+//! The engine is generic over the tick it runs ([`DetectorTick`]): on the board the tick
+//! generated for the embedded detector ([`crate::boot::ApproachTick`]), in tests the
+//! core's interpreter too. A generated tick belongs to one detector image, and
+//! [`Engine::new`] refuses it for any other.
 //!
 //! The board's detector task only adds the cycle counter and the queues around
 //! [`Engine::tick`].
 
-use detector_core::can::{
-    FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status, Transmitter,
-    TxConfigError, TxFrames, TxState,
+use detector_core::{Detector, DetectorTick, Inputs, Output, State, Tick};
+use fingertip_can::{
+    CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status,
+    Transmitter, TxConfigError, TxFrames, TxState,
 };
-use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
 
-use core::sync::atomic::Ordering;
-
-use detector_core::can::CanFrame;
-
+use crate::channel_set::ChannelSet;
 use crate::sampling::AdcSample;
-use crate::shared::Shared;
-use crate::supervise::Task;
+use crate::shared::{DetectorHandle, RxShared};
 use crate::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
@@ -47,26 +48,20 @@ impl ChannelMap {
         }
     }
 
-    fn mask(slots: &[Option<u8>]) -> ChannelMask {
-        slots
-            .iter()
-            .flatten()
-            .fold(0, |m, &i| m | 1u32.checked_shl(u32::from(i)).unwrap_or(0))
+    fn set(slots: &[Option<u8>]) -> ChannelSet {
+        slots.iter().flatten().map(|&i| usize::from(i)).collect()
     }
 
     /// The configuration channels fed by the context frame.
-    pub fn context_mask(&self) -> ChannelMask {
-        ChannelMap::mask(&self.context)
+    pub fn context_channels(&self) -> ChannelSet {
+        ChannelMap::set(&self.context)
     }
 
     /// The configuration channels fed by the tip state frame.
-    pub fn tip_state_mask(&self) -> ChannelMask {
-        ChannelMap::mask(&self.tip_state)
+    pub fn tip_state_channels(&self) -> ChannelSet {
+        ChannelMap::set(&self.tip_state)
     }
 }
-
-/// A detector's tick: `Detector::tick_into`, or one generated for a detector at build time.
-pub type TickFn = fn(&Detector, &mut State, Tick, &Inputs, &mut Output);
 
 /// The engine's fixed parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -76,8 +71,10 @@ pub struct EngineParams {
     pub node: NodeId,
     /// Why the board last reset (reported in every heartbeat).
     pub reset: ResetReason,
-    /// The configuration's checksum (reported in the heartbeat).
-    pub config_checksum: u32,
+    /// The CRC-32 of the image the detector was loaded from
+    /// ([`crate::checksum::crc32`]): reported in the heartbeat as the configuration's
+    /// checksum, and what a generated tick must have been generated for.
+    pub image_crc: u32,
     /// Context and tip state go stale this long after their last good frame, ms.
     pub context_timeout_ms: u32,
     /// The phase goes stale this long after its last good frame, ms.
@@ -87,11 +84,11 @@ pub struct EngineParams {
 impl EngineParams {
     /// Context stale after 20 ms (twenty missed frames at the controller's 1 kHz), phase
     /// after 100 ms.
-    pub const fn new(node: NodeId, reset: ResetReason, config_checksum: u32) -> EngineParams {
+    pub const fn new(node: NodeId, reset: ResetReason, image_crc: u32) -> EngineParams {
         EngineParams {
             node,
             reset,
-            config_checksum,
+            image_crc,
             context_timeout_ms: 20,
             phase_timeout_ms: 100,
         }
@@ -109,6 +106,13 @@ pub enum EngineError {
     Receiver(RxConfigError),
     /// The transmitter refused its parameters.
     Transmitter(TxConfigError),
+    /// The tick was generated for another detector image than the one loaded.
+    TickImage {
+        /// The CRC-32 of the image the tick was generated for.
+        tick: u32,
+        /// The CRC-32 of the image the detector was loaded from.
+        loaded: u32,
+    },
 }
 
 impl core::fmt::Display for EngineError {
@@ -117,6 +121,10 @@ impl core::fmt::Display for EngineError {
             EngineError::Rate(r) => write!(f, "detector rate {r} Hz is not within 1..=65535"),
             EngineError::Receiver(e) => write!(f, "CAN receiver: {e}"),
             EngineError::Transmitter(e) => write!(f, "CAN transmitter: {e}"),
+            EngineError::TickImage { tick, loaded } => write!(
+                f,
+                "the tick was generated for image {tick:#010x}, the detector loaded {loaded:#010x}"
+            ),
         }
     }
 }
@@ -158,10 +166,10 @@ fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
     ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
 }
 
-/// The detector task's state and logic.
-pub struct Engine<'d> {
+/// The detector task's state and logic, running the tick `T`.
+pub struct Engine<'d, T: DetectorTick> {
     detector: &'d Detector,
-    tick: TickFn,
+    tick: T,
     state: State,
     map: ChannelMap,
     receiver: Receiver,
@@ -172,9 +180,25 @@ pub struct Engine<'d> {
     inputs: Inputs,
 }
 
-impl<'d> Engine<'d> {
-    /// An engine for `detector` with a fresh state (first phase active).
-    pub fn new(detector: &'d Detector, params: EngineParams) -> Result<Engine<'d>, EngineError> {
+impl<'d, T: DetectorTick> Engine<'d, T> {
+    /// An engine running `tick` for `detector`, with a fresh state (first phase active).
+    /// `detector` gives the names, the phases and the rate; `tick` computes: the
+    /// interpreter (a [`Detector`] runs any detector) or a tick generated for the image
+    /// whose CRC-32 is `params.image_crc`, and for no other
+    /// ([`EngineError::TickImage`]).
+    pub fn new(
+        detector: &'d Detector,
+        tick: T,
+        params: EngineParams,
+    ) -> Result<Engine<'d, T>, EngineError> {
+        if let Some(generated) = tick.image_crc()
+            && generated != params.image_crc
+        {
+            return Err(EngineError::TickImage {
+                tick: generated,
+                loaded: params.image_crc,
+            });
+        }
         let rate = detector.rate_hz();
         if !(1.0..=65_535.0).contains(&rate) {
             return Err(EngineError::Rate(rate));
@@ -193,7 +217,7 @@ impl<'d> Engine<'d> {
         let status = Status {
             reset: params.reset,
             tick_rate_hz: rate_hz as u16,
-            config_checksum: params.config_checksum,
+            config_checksum: params.image_crc,
             ..Status::default()
         };
         Ok(Engine {
@@ -206,16 +230,8 @@ impl<'d> Engine<'d> {
             status,
             applied_phase: None,
             inputs: Inputs::default(),
-            tick: Detector::tick_into,
+            tick,
         })
-    }
-
-    /// Runs the detector with `tick` from now on instead of its interpreter
-    /// (`Detector::tick_into`): the tick generated for it at build time
-    /// ([`crate::boot::tick`]), which computes the same, faster. Only for the detector it
-    /// was generated from.
-    pub fn set_tick(&mut self, tick: TickFn) {
-        self.tick = tick;
     }
 
     /// The detector this engine runs.
@@ -244,12 +260,12 @@ impl<'d> Engine<'d> {
     }
 
     /// One tick on the newest analog sample: its tick is the detector's `now`.
-    pub fn tick(&mut self, sample: &AdcSample, shared: &Shared, health: &Health) -> TickResult {
+    pub fn tick(&mut self, sample: &AdcSample, rx: &RxShared, health: &Health) -> TickResult {
         let now = sample.tick;
         let receiver = self.receiver;
         let status = &mut self.status;
-        // Under the receive-state mutex: only the core's bookkeeping, no detector work.
-        let (controller, phase) = shared.with_rx(|rx| {
+        // Under the receive-state mutex: only the receiver's bookkeeping, no detector work.
+        let (controller, phase) = rx.with(|rx| {
             receiver.poll(rx, now);
             status.update_from_rx(&receiver, rx, now);
             (receiver.inputs(rx, now), rx.link().phase())
@@ -268,21 +284,20 @@ impl<'d> Engine<'d> {
         }
 
         let map = &self.map;
-        let inputs = &mut self.inputs;
-        inputs.faults = 0;
+        let samples = &mut self.inputs.samples;
+        let mut faults = ChannelSet::EMPTY;
         let mut put = |slot: Option<u8>, value: Option<detector_core::Signal>| {
             if let Some(i) = slot {
                 let i = usize::from(i);
-                match (inputs.samples.get_mut(i), value) {
+                match (samples.get_mut(i), value) {
                     (Some(s), Some(v)) => *s = v,
                     // Withheld: keep the last value (the core ignores it) and flag it.
-                    _ => inputs.faults |= 1u32.checked_shl(i as u32).unwrap_or(0),
+                    _ => faults.insert(i),
                 }
             }
         };
         for (k, (&slot, &value)) in map.adc.iter().zip(&sample.values).enumerate() {
-            let ok = sample.faults & (1 << k) == 0;
-            put(slot, ok.then_some(value));
+            put(slot, (!sample.faults.contains(k)).then_some(value));
         }
         let vel = controller.vel_des;
         let acc = controller.acc_des;
@@ -297,14 +312,11 @@ impl<'d> Engine<'d> {
             put(slot, controller.pos_err.and_then(|p| p.get(k).copied()));
         }
 
+        self.inputs.faults = faults.into();
+
         let mut output = Output::default();
-        (self.tick)(
-            self.detector,
-            &mut self.state,
-            now,
-            &self.inputs,
-            &mut output,
-        );
+        self.tick
+            .tick_into(&mut self.state, now, &self.inputs, &mut output);
 
         let s = &mut self.status;
         s.overruns = health.overruns;
@@ -320,7 +332,7 @@ impl<'d> Engine<'d> {
         }
         s.faults.set(
             FaultFlags::SENSOR_FAULT,
-            sample.faults != 0 || health.sensor_fault,
+            !sample.faults.is_empty() || health.sensor_fault,
         );
 
         let frames = self
@@ -362,47 +374,45 @@ impl TickRunner {
 
     /// One tick. `cycles` reads the free-running cycle counter (it may wrap); `send`
     /// queues a frame for the CAN controller and returns `false` when the queue is full.
-    pub fn step(
+    pub fn step<T: DetectorTick>(
         &mut self,
-        engine: &mut Engine<'_>,
+        engine: &mut Engine<'_, T>,
         sample: &AdcSample,
-        shared: &Shared,
+        shared: &mut DetectorHandle<'_>,
         cycles: impl Fn() -> u32,
         mut send: impl FnMut(CanFrame) -> bool,
     ) -> TickResult {
         // The receive task stamps frames with this tick: never newer than the tick being
-        // judged (the core would read a negative age as stale).
-        shared.now.store(sample.tick, Ordering::Relaxed);
+        // judged (the receiver would read a negative age as stale).
+        shared.set_now(sample.tick);
         let start = cycles();
-        let counters = &shared.counters;
+        let counters = shared.counters();
         let health = Health {
             overruns: self.timing.overruns(),
             worst_tick: self.worst_tenths,
             bus_errors: counters.bus_errors(),
             tx_dropped: self.queue_full.saturating_add(counters.tx_lost.get()),
-            latched: shared.latched.peek(),
-            sensor_fault: shared.sensor_fault.load(Ordering::Relaxed),
+            latched: shared.latched(),
+            sensor_fault: shared.sensor_fault(),
         };
-        let result = engine.tick(sample, shared, &health);
+        let result = engine.tick(sample, shared.rx(), &health);
         for frame in result.frames.iter() {
             if !send(*frame) {
                 self.queue_full = self.queue_full.saturating_add(1);
-                shared.latched.raise(FaultFlags::TX_DROPPED);
+                shared.raise(FaultFlags::TX_DROPPED);
             }
         }
         if result.heartbeat {
-            shared
-                .latched
-                .clear(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
+            shared.clear_reported(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
         let previous_worst = self.timing.worst();
         if self.timing.record(cycles().wrapping_sub(start)) {
-            shared.latched.raise(FaultFlags::OVERRUN);
+            shared.raise(FaultFlags::OVERRUN);
         }
         if self.timing.worst() != previous_worst {
             self.worst_tenths = cycles_to_tenths_us(self.timing.worst(), self.core_hz);
         }
-        shared.liveness.check_in(Task::Detector);
+        shared.check_in();
         result
     }
 
@@ -420,11 +430,13 @@ impl TickRunner {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::boot;
-    use detector_core::can::{
-        CanFrame, ContextMsg, Counter, EventMsg, Message, PhaseMsg, StatusPage, TipStateMsg,
+    use crate::boot::{self, ApproachTick};
+    use crate::checksum::crc32;
+    use crate::shared::Shared;
+    use detector_core::{Level, Signal};
+    use fingertip_can::{
+        ContextMsg, Counter, EventMsg, Message, PhaseMsg, StatusPage, TipStateMsg,
     };
-    use detector_core::{Config, Level, Signal};
 
     /// A small configuration of our own, so these tests check the plumbing whatever the
     /// tuning of `configs/approach.toml`. Channels in an order unlike the board's.
@@ -469,8 +481,29 @@ mod tests {
     const PRESS: u8 = 0b01;
     const BUMP: u8 = 0b10;
 
+    fn config() -> detector_build::Config {
+        detector_build::Config::from_toml(TEST_CONFIG).expect("test config")
+    }
+
     fn detector() -> Detector {
-        Detector::build(&Config::from_toml(TEST_CONFIG).expect("test config")).expect("builds")
+        detector_build::build(&config()).expect("builds")
+    }
+
+    /// An engine running the interpreter on `d`.
+    fn engine(d: &Detector) -> Engine<'_, Detector> {
+        Engine::new(d, d.clone(), params()).unwrap()
+    }
+
+    /// The embedded detector, loaded as the board loads it.
+    fn embedded() -> Box<Detector> {
+        let mut d = Box::new(Detector::empty());
+        boot::load_detector(&mut d).unwrap();
+        d
+    }
+
+    /// The parameters of the board's engine: the embedded image's CRC.
+    fn board_params() -> EngineParams {
+        EngineParams::new(node(), ResetReason::PowerOn, crc32(boot::DETECTOR_IMAGE))
     }
 
     fn node() -> NodeId {
@@ -493,10 +526,9 @@ mod tests {
     }
 
     /// Hands a frame to the receive state as the CAN receive task does.
-    fn deliver(shared: &Shared, engine: &Engine, now: Tick, frame: CanFrame) {
+    fn deliver<T: DetectorTick>(rx: &RxShared, engine: &Engine<'_, T>, now: Tick, frame: CanFrame) {
         let r = engine.receiver();
-        shared
-            .with_rx(|rx| r.receive(rx, now, frame.id().into(), frame.data()))
+        rx.with(|rx| r.receive(rx, now, frame.id().into(), frame.data()))
             .expect("accepted");
     }
 
@@ -551,7 +583,7 @@ mod tests {
     }
 
     /// Fresh context (5 cm/s) and tip state (no error) at `now`.
-    fn fresh(shared: &Shared, e: &Engine, now: Tick, counter: u8) {
+    fn fresh<T: DetectorTick>(shared: &RxShared, e: &Engine<'_, T>, now: Tick, counter: u8) {
         deliver(shared, e, now, context(counter, 0.05));
         deliver(shared, e, now, tip_state(counter, 0.0));
     }
@@ -563,14 +595,13 @@ mod tests {
         assert_eq!(m.adc, [Some(3), None, Some(2), None]);
         assert_eq!(m.context, [Some(0), Some(1), Some(4), Some(5)]);
         assert_eq!(m.tip_state, [Some(6), Some(7)]);
-        assert_eq!(m.context_mask(), 0b11_0011);
-        assert_eq!(m.tip_state_mask(), 0b1100_0000);
+        assert_eq!(m.context_channels(), ChannelSet::from_bits(0b11_0011));
+        assert_eq!(m.tip_state_channels(), ChannelSet::from_bits(0b1100_0000));
     }
 
     #[test]
     fn the_embedded_configuration_maps_every_channel() {
-        let mut d = Box::new(Detector::empty());
-        boot::load_detector(&mut d).unwrap();
+        let d = embedded();
         let m = ChannelMap::resolve(&d);
         let fed = m
             .adc
@@ -584,8 +615,8 @@ mod tests {
             d.channels().len(),
             "build.rs refuses channels nothing feeds"
         );
-        let mut e = Engine::new(&d, params()).unwrap();
-        let r = e.tick(&sample(0, 0.0, 0.0), &Shared::new(), &Health::default());
+        let mut e = Engine::new(&d, ApproachTick, board_params()).unwrap();
+        let r = e.tick(&sample(0, 0.0, 0.0), &RxShared::new(), &Health::default());
         assert!(r.output.decisions.is_empty());
         assert!(r.heartbeat);
     }
@@ -593,8 +624,8 @@ mod tests {
     #[test]
     fn without_context_the_events_are_unjudgeable_and_the_heartbeat_says_why() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         let r = e.tick(&sample(0, -1.0, 50.0), &shared, &Health::default());
         assert_eq!(r.output.evaluated, PRESS | BUMP);
         assert_eq!(r.output.unjudgeable, PRESS | BUMP);
@@ -619,8 +650,8 @@ mod tests {
     #[test]
     fn a_decision_goes_out_in_the_same_tick_ahead_of_everything_else() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         fresh(&shared, &e, 0, 0);
         let r = e.tick(&sample(0, 0.0, 0.0), &shared, &Health::default());
         assert!(r.output.decisions.is_empty());
@@ -643,8 +674,8 @@ mod tests {
     #[test]
     fn stale_context_makes_its_events_unjudgeable_until_fresh_again() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         fresh(&shared, &e, 0, 0);
         // 20 ms at 5 kHz = 100 ticks: fresh up to an age of 100 ticks.
         let r = e.tick(&sample(100, -1.0, 0.0), &shared, &Health::default());
@@ -657,17 +688,18 @@ mod tests {
         assert_eq!(r.output.unjudgeable, 0);
         assert!(!e.status().faults.contains(FaultFlags::CONTEXT_STALE));
         // Context and tip state each went stale once.
-        assert_eq!(shared.with_rx(|rx| rx.counts().stale_episodes()), 2);
+        assert_eq!(shared.with(|rx| rx.counts().stale_episodes()), 2);
     }
 
     #[test]
     fn frames_must_be_stamped_with_the_detectors_tick_not_the_samplers() {
-        // Why the receive task stamps frames with `Shared::now`, the detector's tick: a
-        // frame stamped with a tick the detector has not judged yet (the sampler runs a
-        // block ahead) has a negative age, which reads as stale.
+        // Why the receive task stamps frames with the detector's tick
+        // (`DetectorHandle::set_now`): a frame stamped with a tick the detector has not
+        // judged yet (the sampler runs a block ahead) has a negative age, which reads as
+        // stale.
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         fresh(&shared, &e, 14, 0);
         let r = e.tick(&sample(10, 0.0, 0.0), &shared, &Health::default());
         assert_eq!(r.output.unjudgeable, PRESS | BUMP);
@@ -682,8 +714,8 @@ mod tests {
     #[test]
     fn a_stale_tip_state_only_degrades_the_events_that_read_it() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         deliver(&shared, &e, 0, context(0, 0.05));
         let r = e.tick(&sample(1, 0.0, 0.0), &shared, &Health::default());
         // bump reads pos_err_x in one of its two sensor terms.
@@ -693,15 +725,15 @@ mod tests {
     #[test]
     fn a_stuck_adc_channel_degrades_or_stops_the_events_that_read_it() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         fresh(&shared, &e, 0, 0);
         let mut s = sample(1, -1.0, 50.0);
-        s.faults = 0b0100; // skin_accel: one of bump's two sensor terms
+        s.faults = ChannelSet::from_bits(0b0100); // skin_accel: one of bump's two sensor terms
         let r = e.tick(&s, &shared, &Health::default());
         assert_eq!((r.output.unjudgeable, r.output.degraded), (0, BUMP));
         assert!(e.status().faults.contains(FaultFlags::SENSOR_FAULT));
-        s.faults = 0b0001; // force_x: press's only sensor term
+        s.faults = ChannelSet::from_bits(0b0001); // force_x: press's only sensor term
         let r = e.tick(&s, &shared, &Health::default());
         assert_eq!((r.output.unjudgeable, r.output.degraded), (PRESS, 0));
         assert!(
@@ -711,7 +743,7 @@ mod tests {
                 .all(|d| d.event != e.detector.event("press").unwrap())
         );
         // A channel the configuration does not read (force_y) changes nothing but the flag.
-        s.faults = 0b0010;
+        s.faults = ChannelSet::from_bits(0b0010);
         let r = e.tick(&s, &shared, &Health::default());
         assert_eq!((r.output.unjudgeable, r.output.degraded), (0, 0));
         assert!(e.status().faults.contains(FaultFlags::SENSOR_FAULT));
@@ -720,8 +752,8 @@ mod tests {
     #[test]
     fn the_controllers_phase_is_followed() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         fresh(&shared, &e, 0, 0);
         deliver(&shared, &e, 0, phase(0, 1, 7));
         let r = e.tick(&sample(1, -1.0, 0.0), &shared, &Health::default());
@@ -741,8 +773,8 @@ mod tests {
     #[test]
     fn health_reaches_the_heartbeat() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         let health = Health {
             overruns: 3,
             worst_tick: 2_345,
@@ -792,8 +824,8 @@ mod tests {
     #[test]
     fn the_confidence_stream_is_decimated_to_every_twentieth_tick() {
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let shared = RxShared::new();
         let mut stream_ticks = Vec::new();
         for t in 0..100 {
             if t % 5 == 0 {
@@ -815,9 +847,9 @@ mod tests {
         use crate::calib::NOMINAL;
         use crate::sampling::FrontEnd;
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
+        let mut e = engine(&d);
         let mut fe = FrontEnd::new(NOMINAL, 5000);
-        let shared = Shared::new();
+        let shared = RxShared::new();
         fresh(&shared, &e, 0, 0);
         // Mid-rail: no force. Then 1 N against the motion (−205 counts at 4.88 mN/count).
         let quiet = fe.process(0, &[2048, 2048, 2048, 2048]);
@@ -826,6 +858,77 @@ mod tests {
         let ev = events(&e.tick(&press, &shared, &Health::default()).frames);
         assert_eq!(ev.len(), 2);
         assert!(ev.iter().all(|m| m.event == d.event("press").unwrap()));
+    }
+
+    #[test]
+    fn a_tick_generated_for_another_detector_is_refused() {
+        let d = detector();
+        let crc = crc32(&detector_build::compile(&config()).unwrap().image());
+        let params = EngineParams::new(node(), ResetReason::PowerOn, crc);
+        let tick = ApproachTick
+            .image_crc()
+            .expect("a generated tick knows its image");
+        assert_eq!(
+            Engine::new(&d, ApproachTick, params).err(),
+            Some(EngineError::TickImage { tick, loaded: crc })
+        );
+        // The interpreter runs whatever it is given.
+        assert!(Engine::new(&d, d.clone(), params).is_ok());
+        // And the generated tick is accepted for its own image only.
+        assert_eq!(tick, boot::CONFIG_CHECKSUM);
+        assert!(Engine::new(&embedded(), ApproachTick, board_params()).is_ok());
+    }
+
+    /// The generated tick against the interpreter, each in an engine on the embedded
+    /// detector: every analog channel wobbling, with pushes (force against the motion,
+    /// stress-rate bursts) every 100 ms and a channel stuck now and then, context and tip
+    /// state every millisecond but for a gap, the tick counter across its wrap.
+    #[test]
+    fn the_generated_tick_is_the_interpreters_through_the_engine() {
+        let d = embedded();
+        let mut interpreted = Engine::new(&d, (*d).clone(), board_params()).unwrap();
+        let mut generated = Engine::new(&d, ApproachTick, board_params()).unwrap();
+        let (rx_a, rx_b) = (RxShared::new(), RxShared::new());
+        let mut alerted = 0;
+        for k in 0..6000u32 {
+            let now = k.wrapping_add(u32::MAX - 2000);
+            if k % 5 == 0 && !(3000..3300).contains(&k) {
+                let counter = (k / 5 % 15) as u8;
+                let err = 2e-6 * f64::from(k % 50);
+                for (rx, e) in [
+                    (&rx_a, &interpreted.receiver()),
+                    (&rx_b, &generated.receiver()),
+                ] {
+                    for f in [context(counter, 0.05), tip_state(counter, err)] {
+                        rx.with(|s| e.receive(s, now, f.id().into(), f.data()))
+                            .expect("accepted");
+                    }
+                }
+            }
+            let push = k % 500 >= 250;
+            let mut s = AdcSample {
+                tick: now,
+                ..AdcSample::default()
+            };
+            for (c, v) in s.values.iter_mut().enumerate() {
+                let wobble = 0.01 * (k as f64 * 0.013 * (c + 1) as f64).sin();
+                *v = Signal::from_f64(match c {
+                    0 if push => -0.2 * f64::from(k % 500 - 250),
+                    2 => wobble + if push { 20.0 * (k as f64).sin() } else { 0.0 },
+                    3 if push && k % 500 < 300 => 40.0 * (k as f64).sin(),
+                    _ => wobble,
+                });
+            }
+            if k % 700 < 40 {
+                s.faults.insert((k / 700 % 4) as usize);
+            }
+            let a = interpreted.tick(&s, &rx_a, &Health::default());
+            let b = generated.tick(&s, &rx_b, &Health::default());
+            assert_eq!(a, b, "tick {k}");
+            alerted |= a.output.alerting;
+        }
+        assert_eq!(interpreted.state(), generated.state());
+        assert_ne!(alerted, 0, "the inputs never raise a level: a weak test");
     }
 
     #[test]
@@ -841,8 +944,9 @@ mod tests {
         use crate::supervise::Task;
         use core::cell::Cell;
         let d = detector();
-        let mut e = Engine::new(&d, params()).unwrap();
-        let shared = Shared::new();
+        let mut e = engine(&d);
+        let mut shared = Shared::new();
+        let mut h = shared.split();
         let mut runner = TickRunner::new(170_000_000, 5000);
         // A cycle counter near its wrap that advances 40 000 cycles per read: every tick
         // overruns its 34 000.
@@ -853,7 +957,13 @@ mod tests {
             now
         };
         // The first tick sends the stream and a heartbeat; the queue refuses everything.
-        let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &shared, cycles, |_| false);
+        let r = runner.step(
+            &mut e,
+            &sample(0, 0.0, 0.0),
+            &mut h.detector,
+            cycles,
+            |_| false,
+        );
         assert!(r.heartbeat);
         assert_eq!(runner.queue_full(), r.frames.len() as u32);
         assert_eq!(
@@ -862,16 +972,21 @@ mod tests {
         );
         // Latched after the heartbeat was built: reported by the next one.
         assert!(
-            shared
-                .latched
-                .peek()
+            h.detector
+                .latched()
                 .contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED)
         );
-        assert_eq!(shared.now(), 0);
-        assert!(shared.liveness.round(Task::Detector as u8));
+        assert_eq!(h.can_rx.now(), 0);
+        assert!(h.watchdog.round(Task::Detector as u8));
         let mut reported = None;
         for t in 1..=250 {
-            let r = runner.step(&mut e, &sample(t, 0.0, 0.0), &shared, cycles, |_| true);
+            let r = runner.step(
+                &mut e,
+                &sample(t, 0.0, 0.0),
+                &mut h.detector,
+                cycles,
+                |_| true,
+            );
             if r.heartbeat {
                 reported = decode(&r.frames).into_iter().find_map(|m| match m {
                     Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
@@ -882,8 +997,9 @@ mod tests {
         let f = reported.expect("a heartbeat at tick 250");
         assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED));
         // Every tick overran again, so OVERRUN is latched anew; TX_DROPPED was cleared.
-        assert!(shared.latched.peek().contains(FaultFlags::OVERRUN));
-        assert!(!shared.latched.peek().contains(FaultFlags::TX_DROPPED));
+        assert!(h.detector.latched().contains(FaultFlags::OVERRUN));
+        assert!(!h.detector.latched().contains(FaultFlags::TX_DROPPED));
+        assert_eq!(h.can_rx.now(), 250);
         // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
         assert_eq!(e.status().worst_tick, 2352);
         assert_eq!(runner.timing().overruns(), 251);

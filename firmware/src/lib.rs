@@ -5,6 +5,7 @@
 pub mod boot;
 pub mod calib;
 pub mod can_timing;
+pub mod channel_set;
 pub mod checksum;
 pub mod engine;
 pub mod rail;

@@ -1,18 +1,22 @@
 //! The board binary: clocks, peripherals and the embassy tasks around the lib.
 //!
-//! Tasks, each owning its peripheral and talking through the queues and [`Shared`]:
+//! Tasks, each owning its peripheral and talking through the queues and its handle on
+//! the [`Shared`] state (what it writes, it owns):
 //! - `sampler_task`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
 //!   delivers them a block at a time; calibrated samples go to the detector's queue;
 //! - `detector_task`: one [`Engine::tick`] per sample, timed with the DWT cycle counter;
 //!   its frames go to the CAN transmit queue;
-//! - `temperature`: the TMP117 over I2C2, four times a second;
+//! - `temperature`: the TMP117 over I2C2, four times a second; publishes the temperature;
 //! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
 //! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
 //!
-//! Everything worth testing lives in the lib; this file is wiring.
+//! Everything worth testing lives in the lib; this file is wiring, and `regs` holds its
+//! raw register accesses.
 
 #![no_std]
 #![no_main]
+
+mod regs;
 
 use core::num::{NonZeroU8, NonZeroU16};
 
@@ -28,22 +32,26 @@ use embassy_stm32::peripherals::{ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, FDCAN1, I2C
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma, pac};
+use embassy_stm32::{bind_interrupts, dma};
 use embassy_sync::channel::Channel;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
 use detector_core::Detector;
-use detector_core::can::{CanFrame, FaultFlags, Receiver};
+use fingertip_can::{CanFrame, Receiver};
+use firmware::boot::{self, ApproachTick};
 use firmware::engine::{Engine, EngineParams, TickRunner};
 use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
-use firmware::shared::{RawMutex, Shared};
-use firmware::supervise::{BusAction, BusState, BusSupervisor, Task};
+use firmware::shared::{
+    BusHandle, CanRxHandle, CanTxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
+    TemperatureHandle, WatchdogHandle,
+};
+use firmware::supervise::{BusAction, BusSupervisor, Task};
 use firmware::timing::budget_cycles;
 use firmware::tmp117::{self, SensorHealth, Tmp117};
 use firmware::wiring::CORE_CLOCK_HZ;
-use firmware::{boot, calib, can_timing, reset};
+use firmware::{calib, can_timing, checksum, reset};
 
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
@@ -68,7 +76,7 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
 static DETECTOR: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
 static SHARED: StaticCell<Shared> = StaticCell::new();
-static ENGINE: StaticCell<Engine<'static>> = StaticCell::new();
+static ENGINE: StaticCell<Engine<'static, ApproachTick>> = StaticCell::new();
 static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// IWDG period: four missed 50 ms rounds of the watchdog task.
@@ -135,8 +143,8 @@ macro_rules! spawn {
 
 /// Everything the tasks get, set up before the executor starts.
 struct Board {
-    engine: &'static mut Engine<'static>,
-    shared: &'static Shared,
+    engine: &'static mut Engine<'static, ApproachTick>,
+    handles: Handles<'static>,
     rate_hz: u32,
     receiver: Receiver,
     adc: RingBufferedAdc<'static, ADC1>,
@@ -155,15 +163,24 @@ fn main() -> ! {
     // and do the heavy set-up (the detector's construction above all) in a function
     // whose frame is gone before the tasks run.
     let b = setup();
+    let Handles {
+        sampler,
+        detector,
+        temperature: sensor_handle,
+        can_rx: can_rx_handle,
+        can_tx: can_tx_handle,
+        bus,
+        watchdog,
+    } = b.handles;
     let executor = EXECUTOR.init(Executor::new());
     executor.run(move |spawner: Spawner| {
-        spawn!(spawner, detector_task(b.engine, b.shared, b.rate_hz));
-        spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, b.shared));
-        spawn!(spawner, temperature(b.sensor, b.shared));
-        spawn!(spawner, can_rx(b.can_rx, b.receiver, b.shared));
-        spawn!(spawner, can_tx(b.can_tx, b.shared));
-        spawn!(spawner, can_supervisor(b.can_properties, b.shared));
-        spawn!(spawner, watchdog_task(b.watchdog, b.shared));
+        spawn!(spawner, detector_task(b.engine, detector, b.rate_hz));
+        spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, sampler));
+        spawn!(spawner, temperature(b.sensor, sensor_handle));
+        spawn!(spawner, can_rx(b.can_rx, b.receiver, can_rx_handle));
+        spawn!(spawner, can_tx(b.can_tx, can_tx_handle));
+        spawn!(spawner, can_supervisor(b.can_properties, bus));
+        spawn!(spawner, watchdog_task(b.watchdog, watchdog));
     })
 }
 
@@ -172,9 +189,7 @@ fn main() -> ! {
 fn setup() -> Board {
     // The reset reason, read before the HAL touches the RCC, and cleared so the next
     // boot reports its own.
-    let csr = pac::RCC.csr().read().0;
-    pac::RCC.csr().modify(|w| w.set_rmvf(true));
-    let reset = reset::reset_reason(csr);
+    let reset = reset::reset_reason(regs::take_reset_flags());
     let p = embassy_stm32::init(clocks());
     info!(
         "fingertip node {=u8}, reset: {=str}, config {=str} crc32 {=u32:#010x}",
@@ -184,8 +199,7 @@ fn setup() -> Board {
         boot::CONFIG_CHECKSUM
     );
 
-    // Keep the watchdog from firing while a debugger holds the core.
-    pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));
+    regs::freeze_watchdog_when_halted();
 
     // The cycle counter that times the detector's ticks.
     let Some(mut core) = cortex_m::Peripherals::take() else {
@@ -199,17 +213,19 @@ fn setup() -> Board {
     let detector = build_detector();
     let rate = detector.rate_hz();
     let rate_hz = (rate + 0.5) as u32;
-    let params = EngineParams::new(boot::NODE_ID, reset, boot::CONFIG_CHECKSUM);
+    // The CRC of the image actually loaded: the generated tick must be the one made for
+    // it, which the engine checks.
+    let image_crc = checksum::crc32(boot::DETECTOR_IMAGE);
+    let params = EngineParams::new(boot::NODE_ID, reset, image_crc);
     // In a static, not moved into the task: an async task's arguments are stored in
     // its future twice (as arguments and as locals), and the engine is 3 KiB.
-    let engine: &'static mut Engine<'static> = match Engine::new(detector, params) {
-        Ok(e) => ENGINE.init(e),
-        Err(e) => defmt::panic!("engine: {}", e),
-    };
-    // The detector is the embedded one, whose tick build.rs generated.
-    engine.set_tick(boot::tick);
+    let engine: &'static mut Engine<'static, ApproachTick> =
+        match Engine::new(detector, ApproachTick, params) {
+            Ok(e) => ENGINE.init(e),
+            Err(e) => defmt::panic!("engine: {}", e),
+        };
     let receiver = engine.receiver();
-    let shared: &'static Shared = SHARED.init_with(Shared::new);
+    let handles = SHARED.init_with(Shared::new).split();
 
     // ADC1: the four analog channels, one scan per TIM6 update, circular DMA.
     let adc = Adc::new(p.ADC1, AdcConfig::default());
@@ -233,11 +249,7 @@ fn setup() -> Board {
     // Load the prescaler now (it is buffered until an update), before TRGO is routed to
     // the ADC so this update triggers nothing.
     timer.generate_update_event();
-    // TRGO on every update event: one ADC trigger per period.
-    timer
-        .regs_basic()
-        .cr2()
-        .modify(|w| w.set_mms(pac::timer::vals::Mms::UPDATE));
+    regs::trigger_on_update(&timer);
     info!(
         "sampling at {=u64} mHz ({=u32} timer clocks), budget {=u32} cycles per tick",
         boot::TRIGGER_RATE_MHZ,
@@ -288,7 +300,7 @@ fn setup() -> Board {
     );
     {
         use can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
-        use detector_core::can::MessageKind;
+        use fingertip_can::MessageKind;
         let id = |k: MessageKind| k.id(boot::NODE_ID);
         can.properties().set_standard_filter(
             StandardFilterSlot::_0,
@@ -311,7 +323,7 @@ fn setup() -> Board {
 
     Board {
         engine,
-        shared,
+        handles,
         rate_hz,
         receiver,
         adc: ring,
@@ -342,7 +354,7 @@ async fn sampler_task(
     mut adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
     mut sampler: Sampler,
-    shared: &'static Shared,
+    mut shared: SamplerHandle<'static>,
 ) {
     let mut block = [0u16; BLOCK_LEN];
     adc.start();
@@ -354,18 +366,14 @@ async fn sampler_task(
                 sampler.on_block(&block, now, shared.temperature(), |s| {
                     SAMPLES.try_send(s).is_ok()
                 });
-                shared.counters.lost_samples.set(sampler.clock.lost());
-                shared
-                    .counters
-                    .rail_episodes
-                    .set(sampler.front_end.rail_episodes());
-                shared.liveness.check_in(Task::Sampler);
+                shared.set_lost_samples(sampler.clock.lost());
+                shared.set_rail_episodes(sampler.front_end.rail_episodes());
+                shared.check_in();
             }
             Err(_) => {
                 // The DMA lapped us; the ring restarts at the next aligned scan.
                 sampler.on_overrun();
-                shared.counters.adc_overruns.add(1);
-                shared.latched.raise(FaultFlags::OVERRUN);
+                shared.adc_overrun();
             }
         }
     }
@@ -374,8 +382,8 @@ async fn sampler_task(
 /// One engine tick per sample, timed with the DWT cycle counter; frames to the CAN queue.
 #[embassy_executor::task]
 async fn detector_task(
-    engine: &'static mut Engine<'static>,
-    shared: &'static Shared,
+    engine: &'static mut Engine<'static, ApproachTick>,
+    mut shared: DetectorHandle<'static>,
     rate_hz: u32,
 ) {
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
@@ -383,7 +391,7 @@ async fn detector_task(
     let detector = engine.detector();
     loop {
         let sample = SAMPLES.receive().await;
-        let result = runner.step(engine, &sample, shared, DWT::cycle_count, |f| {
+        let result = runner.step(engine, &sample, &mut shared, DWT::cycle_count, |f| {
             TX_FRAMES.try_send(f).is_ok()
         });
 
@@ -418,12 +426,14 @@ async fn detector_task(
 #[embassy_executor::task]
 async fn temperature(
     mut sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
-    shared: &'static Shared,
+    mut shared: TemperatureHandle<'static>,
 ) {
     let mut health = SensorHealth::new(SENSOR_TRIP);
     let mut ticker = Ticker::every(TEMPERATURE_PERIOD);
     loop {
-        if tmp117::poll_sensor(&mut sensor, &mut health, shared).await {
+        let fault_changed = tmp117::poll_sensor(&mut sensor, &mut health).await;
+        shared.publish(&health);
+        if fault_changed {
             if health.is_faulty() {
                 warn!("temperature sensor not answering: force drift compensation frozen");
             } else {
@@ -434,29 +444,30 @@ async fn temperature(
     }
 }
 
-/// Hands every received frame to the core's receiver, stamped with the detector's tick.
+/// Hands every received frame to the protocol's receiver, stamped with the detector's tick.
 #[embassy_executor::task]
-async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, shared: &'static Shared) {
+async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHandle<'static>) {
     loop {
         match rx.read().await {
             Ok(envelope) => {
                 let now = shared.now();
                 let frame = &envelope.frame;
-                let result =
-                    shared.with_rx(|state| receiver.receive(state, now, *frame.id(), frame.data()));
-                shared.counters.rx_frames.add(1);
+                let result = shared
+                    .rx()
+                    .with(|state| receiver.receive(state, now, *frame.id(), frame.data()));
+                shared.frame_received();
                 if let Err(reason) = result {
                     defmt::debug!("frame rejected: {=str}", reason.name());
                 }
             }
-            Err(_) => shared.counters.rx_protocol_errors.add(1),
+            Err(_) => shared.protocol_error(),
         }
     }
 }
 
 /// Sends the queued frames, in order.
 #[embassy_executor::task]
-async fn can_tx(mut tx: CanTx<'static>, shared: &'static Shared) {
+async fn can_tx(mut tx: CanTx<'static>, mut shared: CanTxHandle<'static>) {
     loop {
         let frame = TX_FRAMES.receive().await;
         let lost = match can::Frame::new_standard(frame.id().as_raw(), frame.data()) {
@@ -465,39 +476,29 @@ async fn can_tx(mut tx: CanTx<'static>, shared: &'static Shared) {
             Err(_) => true,
         };
         if lost {
-            shared.counters.tx_lost.add(1);
-            shared.latched.raise(FaultFlags::TX_DROPPED);
+            shared.frame_lost();
         }
     }
 }
 
 /// Watches the controller's error state; lets it out of bus-off after a back-off.
 #[embassy_executor::task]
-async fn can_supervisor(properties: Properties, shared: &'static Shared) {
+async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) {
     let mut supervisor = BusSupervisor::new();
     let mut protocol_errors = 0u32;
     let mut ticker = Ticker::every(CAN_SUPERVISOR_PERIOD);
     loop {
-        let psr = pac::FDCAN1.psr().read();
-        let state = if psr.bo() {
-            BusState::BusOff
-        } else if psr.ep() {
-            BusState::ErrorPassive
-        } else {
-            BusState::ErrorActive
-        };
-        // LEC: 0 no error, 1..=6 an error since the last read, 7 no change.
-        if (1..=6).contains(&psr.lec().to_bits()) {
+        let status = regs::fdcan_status();
+        let state = status.state;
+        if status.protocol_error {
             protocol_errors = protocol_errors.saturating_add(1);
         }
         let events = supervisor.error_events();
         if supervisor.poll(Instant::now().as_millis(), state) == BusAction::Recover {
-            // Leave the initialization state: the FDCAN rejoins after 128 × 11
-            // recessive bits.
-            pac::FDCAN1.cccr().modify(|w| w.set_init(false));
+            regs::fdcan_recover();
         }
         if supervisor.error_events() != events {
-            shared.latched.raise(FaultFlags::BUS_ERROR);
+            shared.bus_error();
             warn!(
                 "CAN {}: tx errors {=u8}, rx errors {=u8}",
                 state,
@@ -505,23 +506,23 @@ async fn can_supervisor(properties: Properties, shared: &'static Shared) {
                 properties.rx_error_count()
             );
         }
-        shared.counters.bus_off.set(supervisor.bus_off());
-        shared
-            .counters
-            .bus_state_events
-            .set(supervisor.error_events().saturating_add(protocol_errors));
+        shared.set_bus_off(supervisor.bus_off());
+        shared.set_state_events(supervisor.error_events().saturating_add(protocol_errors));
         ticker.next().await;
     }
 }
 
 /// Refreshes the independent watchdog only while the critical tasks check in.
 #[embassy_executor::task]
-async fn watchdog_task(mut watchdog: IndependentWatchdog<'static, IWDG>, shared: &'static Shared) {
+async fn watchdog_task(
+    mut watchdog: IndependentWatchdog<'static, IWDG>,
+    mut shared: WatchdogHandle<'static>,
+) {
     watchdog.unleash();
     let mut ticker = Ticker::every(WATCHDOG_ROUND);
     loop {
         ticker.next().await;
-        if shared.liveness.round(Task::CRITICAL) {
+        if shared.round(Task::CRITICAL) {
             watchdog.pet();
         } else {
             warn!("a critical task is silent: not refreshing the watchdog");

@@ -8,7 +8,7 @@
 //! other flag is set. The flags accumulate until cleared, so the firmware reads them
 //! once at boot and clears them.
 
-use detector_core::can::ResetReason;
+use fingertip_can::ResetReason;
 
 /// LPWRRSTF.
 pub const LPWRRSTF: u32 = 1 << 31;

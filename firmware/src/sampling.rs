@@ -12,6 +12,7 @@
 use detector_core::{Signal, Tick};
 
 use crate::calib::{ActiveCalibration, Calibration};
+use crate::channel_set::ChannelSet;
 use crate::rail::{RailLimits, RailMonitor};
 use crate::wiring::ADC_CHANNELS;
 
@@ -112,8 +113,8 @@ pub struct AdcSample {
     pub tick: Tick,
     /// Calibrated values, in [`ADC_CHANNELS`] order and units.
     pub values: [Signal; SCAN_LEN],
-    /// Channels currently stuck at a rail: bit `i` for `ADC_CHANNELS[i]`.
-    pub faults: u8,
+    /// Channels currently stuck at a rail, by their place in [`ADC_CHANNELS`].
+    pub faults: ChannelSet,
 }
 
 /// The per-channel processing of each scan: calibration and the rail watch.
@@ -164,7 +165,7 @@ impl FrontEnd {
             ) {
                 *v = a.apply(counts);
                 if r.update(&self.limits, counts) {
-                    sample.faults |= 1 << i;
+                    sample.faults.insert(i);
                 }
             }
         }
@@ -291,13 +292,13 @@ mod tests {
         assert_eq!(s.tick, 7);
         assert_eq!(s.values[0], Signal::ZERO);
         assert!((s.values[1].to_f64() - 1.0).abs() < 0.01, "{}", s.values[1]);
-        assert_eq!(s.faults, 0);
+        assert!(s.faults.is_empty());
         // stress_rate pinned at 0 counts: faulty after 50 ms, the others are not.
         let mut last = s;
         for t in 0..250 {
             last = fe.process(t, &[2048, 2048, 2048, 0]);
         }
-        assert_eq!(last.faults, 0b1000);
+        assert_eq!(last.faults, ChannelSet::from_bits(0b1000));
         assert_eq!(fe.rail_episodes(), 1);
     }
 

@@ -1,78 +1,75 @@
-//! The state the tasks share: the newest tick, the CAN receive state, the board
-//! temperature, fault flags latched for the next heartbeat, counters, and the watchdog's
-//! check-ins.
+//! The state the tasks share, each part with an owner: the detector's tick, the CAN
+//! receive state, the board temperature, fault flags latched for the next heartbeat,
+//! counters, and the watchdog's check-ins.
 //!
-//! Each counter has one writer (the task that owns the thing counted) and is read by the
-//! detector task when it fills the status heartbeat; atomics are enough for that. The
-//! receive state is written by the CAN receive task and read-modified by the detector
-//! task once per tick, under a critical-section mutex held only for the few
-//! instructions of the core's `receive` / `poll` calls.
+//! [`Shared`] holds it all, with nothing public; [`Shared::split`] hands out one handle
+//! per task ([`Handles`]), once, and each handle can write only what its task owns:
+//!
+//! | handle | writes | reads |
+//! |---|---|---|
+//! | [`SamplerHandle`] | its counters (lost samples, ADC overruns, rail episodes), the overrun flag, its check-in | the temperature |
+//! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags and their clearing, its check-in | every counter, the latched flags, the sensor fault |
+//! | [`TemperatureHandle`] | the temperature ([`Watch`]), its counters (sensor errors, timeouts) | — |
+//! | [`CanRxHandle`] | its counters (frames, protocol errors) | the detector's tick |
+//! | [`CanTxHandle`] | its counter (frames lost), the frame-dropped flag | — |
+//! | [`BusHandle`] | its counters (bus-off, bus state events), the bus-error flag | — |
+//! | [`WatchdogHandle`] | starts the check-in rounds | the check-ins |
+//!
+//! Each handle is made once, by [`Shared::split`]. Counters have one writer each (the
+//! handle of the task that owns the thing counted), so atomics are enough; to everyone
+//! else a [`Counter`] is read-only. The CAN receive state ([`RxShared`]) is written by the
+//! CAN receive task and read-modified by the detector task once per tick, under a
+//! critical-section mutex held only for the few instructions of the receiver's
+//! `receive` / `poll` calls.
 
-use core::cell::{Cell, RefCell};
-use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, Ordering};
+use core::cell::RefCell;
+use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
+use embassy_sync::watch::Watch;
 
-use detector_core::can::{FaultFlags, RxState};
 use detector_core::{Signal, Tick};
+use fingertip_can::{FaultFlags, RxState};
 
-use crate::supervise::Liveness;
+use crate::supervise::{Liveness, Task};
+use crate::tmp117::SensorHealth;
 
 /// The mutex flavour shared between tasks (and, for the HAL, interrupts).
 pub type RawMutex = CriticalSectionRawMutex;
 
 /// Fault flags raised by any task and reported, then cleared, by the next heartbeat
-/// (the core's flags that mean "since the last heartbeat": overrun, bus error, frame
-/// dropped).
+/// (the flags that mean "since the last heartbeat": overrun, bus error, frame dropped).
 #[derive(Debug, Default)]
-pub struct Latch(AtomicU8);
+struct Latch(AtomicU8);
 
 impl Latch {
-    /// Nothing latched.
-    pub const fn new() -> Latch {
+    const fn new() -> Latch {
         Latch(AtomicU8::new(0))
     }
 
-    /// Raises `flags`.
-    #[inline]
-    pub fn raise(&self, flags: FaultFlags) {
+    fn raise(&self, flags: FaultFlags) {
         self.0.fetch_or(flags.0, Ordering::Relaxed);
     }
 
-    /// The flags raised and not yet reported.
-    pub fn peek(&self) -> FaultFlags {
+    fn peek(&self) -> FaultFlags {
         FaultFlags(self.0.load(Ordering::Relaxed))
     }
 
     /// Clears `reported` (and only those: a flag raised since the peek stays).
-    pub fn clear(&self, reported: FaultFlags) {
+    fn clear(&self, reported: FaultFlags) {
         self.0.fetch_and(!reported.0, Ordering::Relaxed);
     }
 }
 
-/// A counter with one writer.
+/// A counter: read by anyone, written only through the handle of the task that owns the
+/// thing counted.
 #[derive(Debug, Default)]
 pub struct Counter(AtomicU32);
 
 impl Counter {
-    /// Zero.
-    pub const fn new() -> Counter {
+    const fn new() -> Counter {
         Counter(AtomicU32::new(0))
-    }
-
-    /// Adds `n`, saturating at `u32::MAX`.
-    #[inline]
-    pub fn add(&self, n: u32) {
-        // One writer, so load + store cannot lose an update.
-        let v = self.0.load(Ordering::Relaxed);
-        self.0.store(v.saturating_add(n), Ordering::Relaxed);
-    }
-
-    /// Sets the value (for counts kept elsewhere and published).
-    #[inline]
-    pub fn set(&self, v: u32) {
-        self.0.store(v, Ordering::Relaxed);
     }
 
     /// The value.
@@ -80,9 +77,21 @@ impl Counter {
     pub fn get(&self) -> u32 {
         self.0.load(Ordering::Relaxed)
     }
+
+    /// Adds `n`, saturating at `u32::MAX`.
+    fn add(&self, n: u32) {
+        // One writer, so load + store cannot lose an update.
+        self.0
+            .store(self.get().saturating_add(n), Ordering::Relaxed);
+    }
+
+    /// Sets the value (for counts kept elsewhere and published).
+    fn set(&self, v: u32) {
+        self.0.store(v, Ordering::Relaxed);
+    }
 }
 
-/// Everything counted since boot.
+/// Everything counted since boot (read-only: each counter's writer is its task's).
 #[derive(Debug, Default)]
 pub struct Counters {
     /// Scans lost: DMA overruns and scans dropped because the detector's queue was full
@@ -107,7 +116,7 @@ pub struct Counters {
     pub rx_protocol_errors: Counter,
     /// Frames the CAN transmit task could not send (mailbox replaced) (CAN transmit).
     pub tx_lost: Counter,
-    /// Received frames handed to the core's receiver (CAN receive).
+    /// Received frames handed to the receiver (CAN receive).
     pub rx_frames: Counter,
 }
 
@@ -119,8 +128,7 @@ impl Counters {
             .saturating_add(self.rx_protocol_errors.get())
     }
 
-    /// All zero.
-    pub const fn new() -> Counters {
+    const fn new() -> Counters {
         Counters {
             lost_samples: Counter::new(),
             adc_overruns: Counter::new(),
@@ -136,27 +144,55 @@ impl Counters {
     }
 }
 
-/// The shared state. Created once at boot (the receive state has no `const`
-/// constructor) and handed to every task as `&'static`.
+/// The board temperature as the temperature task last published it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Temperature {
+    /// °C; `None` until the first reading and while the sensor is faulty.
+    pub celsius: Option<Signal>,
+    /// The sensor is faulty.
+    pub sensor_fault: bool,
+}
+
+/// The temperature: one sender (the temperature task); readers take the newest value
+/// without waiting (`None` before the first).
+type TemperatureWatch = Watch<RawMutex, Temperature, 1>;
+
+/// The CAN receive state, under a critical-section mutex: the receive task writes it,
+/// the detector task polls it once per tick.
+pub struct RxShared(Mutex<RawMutex, RefCell<RxState>>);
+
+impl Default for RxShared {
+    fn default() -> Self {
+        RxShared::new()
+    }
+}
+
+impl RxShared {
+    /// Nothing received.
+    pub fn new() -> RxShared {
+        RxShared(Mutex::new(RefCell::new(RxState::new())))
+    }
+
+    /// Runs `f` on the receive state, under the mutex (keep `f` short).
+    pub fn with<R>(&self, f: impl FnOnce(&mut RxState) -> R) -> R {
+        self.0.lock(|rx| f(&mut rx.borrow_mut()))
+    }
+}
+
+/// The shared state, created once at boot (the receive state has no `const`
+/// constructor) and [split](Shared::split) into the tasks' handles.
 pub struct Shared {
     /// The tick the detector is at: the clock the CAN receive task stamps frames with.
     /// Not the newest tick sampled, which runs up to a queue's length ahead: a frame
-    /// stamped after the tick being judged has a negative age, which the core reads as
-    /// stale.
-    pub now: AtomicU32,
-    /// The core's CAN receive state.
-    pub rx: Mutex<RawMutex, RefCell<RxState>>,
-    /// The board temperature, °C; `None` until the first reading and while the sensor is
-    /// faulty.
-    pub temperature: Mutex<RawMutex, Cell<Option<Signal>>>,
-    /// The temperature sensor is faulty.
-    pub sensor_fault: AtomicBool,
-    /// Flags for the next heartbeat.
-    pub latched: Latch,
-    /// Counters.
-    pub counters: Counters,
-    /// Watchdog check-ins.
-    pub liveness: Liveness,
+    /// stamped after the tick being judged has a negative age, which the receiver reads
+    /// as stale.
+    now: AtomicU32,
+    rx: RxShared,
+    temperature: TemperatureWatch,
+    latched: Latch,
+    counters: Counters,
+    liveness: Liveness,
 }
 
 impl Default for Shared {
@@ -165,38 +201,212 @@ impl Default for Shared {
     }
 }
 
+/// Every task's handle on the [`Shared`] state.
+pub struct Handles<'a> {
+    /// The sampler's.
+    pub sampler: SamplerHandle<'a>,
+    /// The detector task's.
+    pub detector: DetectorHandle<'a>,
+    /// The temperature task's.
+    pub temperature: TemperatureHandle<'a>,
+    /// The CAN receive task's.
+    pub can_rx: CanRxHandle<'a>,
+    /// The CAN transmit task's.
+    pub can_tx: CanTxHandle<'a>,
+    /// The CAN supervisor's.
+    pub bus: BusHandle<'a>,
+    /// The watchdog task's.
+    pub watchdog: WatchdogHandle<'a>,
+}
+
 impl Shared {
     /// The state at boot.
     pub fn new() -> Shared {
         Shared {
             now: AtomicU32::new(0),
-            rx: Mutex::new(RefCell::new(RxState::new())),
-            temperature: Mutex::new(Cell::new(None)),
-            sensor_fault: AtomicBool::new(false),
+            rx: RxShared::new(),
+            temperature: Watch::new(),
             latched: Latch::new(),
             counters: Counters::new(),
             liveness: Liveness::new(),
         }
     }
 
-    /// The tick the detector is at.
-    pub fn now(&self) -> Tick {
-        self.now.load(Ordering::Relaxed)
+    /// The tasks' handles. Borrowing the state mutably for as long as the handles live,
+    /// it can be split only once: every counter gets one writer.
+    pub fn split(&mut self) -> Handles<'_> {
+        let s: &Shared = self;
+        Handles {
+            sampler: SamplerHandle(s),
+            detector: DetectorHandle(s),
+            temperature: TemperatureHandle(s),
+            can_rx: CanRxHandle(s),
+            can_tx: CanTxHandle(s),
+            bus: BusHandle(s),
+            watchdog: WatchdogHandle(s),
+        }
     }
+}
 
-    /// Runs `f` on the receive state, under the mutex (keep `f` short).
-    pub fn with_rx<R>(&self, f: impl FnOnce(&mut RxState) -> R) -> R {
-        self.rx.lock(|rx| f(&mut rx.borrow_mut()))
-    }
+/// The sampler task's handle.
+pub struct SamplerHandle<'a>(&'a Shared);
 
-    /// The board temperature.
+impl SamplerHandle<'_> {
+    /// The board temperature, °C; `None` before the first reading and while the sensor
+    /// is faulty.
     pub fn temperature(&self) -> Option<Signal> {
-        self.temperature.lock(Cell::get)
+        self.0.temperature.try_get().and_then(|t| t.celsius)
     }
 
-    /// Publishes the board temperature.
-    pub fn set_temperature(&self, t: Option<Signal>) {
-        self.temperature.lock(|c| c.set(t));
+    /// Publishes the scans lost so far (the sampler's count).
+    pub fn set_lost_samples(&mut self, n: u32) {
+        self.0.counters.lost_samples.set(n);
+    }
+
+    /// Publishes the stuck-at-rail episodes so far (the front end's count).
+    pub fn set_rail_episodes(&mut self, n: u32) {
+        self.0.counters.rail_episodes.set(n);
+    }
+
+    /// The DMA overran the reader: counted, and latched for the next heartbeat.
+    pub fn adc_overrun(&mut self) {
+        self.0.counters.adc_overruns.add(1);
+        self.0.latched.raise(FaultFlags::OVERRUN);
+    }
+
+    /// The sampler is alive.
+    pub fn check_in(&self) {
+        self.0.liveness.check_in(Task::Sampler);
+    }
+}
+
+/// The detector task's handle.
+pub struct DetectorHandle<'a>(&'a Shared);
+
+impl<'a> DetectorHandle<'a> {
+    /// Publishes the tick the detector is at (the CAN receive task's clock).
+    pub fn set_now(&mut self, now: Tick) {
+        self.0.now.store(now, Ordering::Relaxed);
+    }
+
+    /// The CAN receive state.
+    pub fn rx(&self) -> &'a RxShared {
+        &self.0.rx
+    }
+
+    /// Every counter, read-only.
+    pub fn counters(&self) -> &'a Counters {
+        &self.0.counters
+    }
+
+    /// Whether the temperature sensor is faulty (not before its first report).
+    pub fn sensor_fault(&self) -> bool {
+        self.0.temperature.try_get().is_some_and(|t| t.sensor_fault)
+    }
+
+    /// The flags latched and not yet reported.
+    pub fn latched(&self) -> FaultFlags {
+        self.0.latched.peek()
+    }
+
+    /// Latches `flags` for the next heartbeat.
+    pub fn raise(&self, flags: FaultFlags) {
+        self.0.latched.raise(flags);
+    }
+
+    /// A heartbeat reported `flags`: clears them (and only them: a flag raised since it
+    /// was built stays for the next).
+    pub fn clear_reported(&mut self, flags: FaultFlags) {
+        self.0.latched.clear(flags);
+    }
+
+    /// The detector is alive.
+    pub fn check_in(&self) {
+        self.0.liveness.check_in(Task::Detector);
+    }
+}
+
+/// The temperature task's handle.
+pub struct TemperatureHandle<'a>(&'a Shared);
+
+impl TemperatureHandle<'_> {
+    /// Publishes the sensor's state: the temperature to use (none while faulty), the
+    /// fault, and the error counts.
+    pub fn publish(&mut self, health: &SensorHealth) {
+        self.0.temperature.sender().send(Temperature {
+            celsius: health.temperature(),
+            sensor_fault: health.is_faulty(),
+        });
+        let c = &self.0.counters;
+        c.sensor_errors.set(health.errors().total());
+        c.sensor_timeouts.set(health.errors().timeout);
+    }
+}
+
+/// The CAN receive task's handle.
+pub struct CanRxHandle<'a>(&'a Shared);
+
+impl<'a> CanRxHandle<'a> {
+    /// The tick the detector is at: the stamp for a received frame.
+    pub fn now(&self) -> Tick {
+        self.0.now.load(Ordering::Relaxed)
+    }
+
+    /// The CAN receive state.
+    pub fn rx(&self) -> &'a RxShared {
+        &self.0.rx
+    }
+
+    /// A frame was handed to the receiver.
+    pub fn frame_received(&mut self) {
+        self.0.counters.rx_frames.add(1);
+    }
+
+    /// The receive path saw a protocol error.
+    pub fn protocol_error(&mut self) {
+        self.0.counters.rx_protocol_errors.add(1);
+    }
+}
+
+/// The CAN transmit task's handle.
+pub struct CanTxHandle<'a>(&'a Shared);
+
+impl CanTxHandle<'_> {
+    /// A frame could not be sent: counted, and latched for the next heartbeat.
+    pub fn frame_lost(&mut self) {
+        self.0.counters.tx_lost.add(1);
+        self.0.latched.raise(FaultFlags::TX_DROPPED);
+    }
+}
+
+/// The CAN supervisor's handle.
+pub struct BusHandle<'a>(&'a Shared);
+
+impl BusHandle<'_> {
+    /// Publishes the bus-off entries so far (the supervisor's count).
+    pub fn set_bus_off(&mut self, n: u32) {
+        self.0.counters.bus_off.set(n);
+    }
+
+    /// Publishes the error-passive and bus-off entries and protocol errors so far.
+    pub fn set_state_events(&mut self, n: u32) {
+        self.0.counters.bus_state_events.set(n);
+    }
+
+    /// Latches a bus error for the next heartbeat.
+    pub fn bus_error(&self) {
+        self.0.latched.raise(FaultFlags::BUS_ERROR);
+    }
+}
+
+/// The watchdog task's handle.
+pub struct WatchdogHandle<'a>(&'a Shared);
+
+impl WatchdogHandle<'_> {
+    /// Whether every task of `required` checked in since the last round; starts a new
+    /// round either way.
+    pub fn round(&mut self, required: u8) -> bool {
+        self.0.liveness.round(required)
     }
 }
 
@@ -206,33 +416,68 @@ mod tests {
 
     #[test]
     fn latched_flags_survive_until_reported() {
-        let l = Latch::new();
-        l.raise(FaultFlags::OVERRUN);
-        let seen = l.peek();
+        let mut s = Shared::new();
+        let mut h = s.split();
+        h.sampler.adc_overrun();
+        let seen = h.detector.latched();
+        assert_eq!(seen, FaultFlags::OVERRUN);
         // Raised after the heartbeat read the flags: kept for the next one.
-        l.raise(FaultFlags::BUS_ERROR);
-        l.clear(seen);
-        assert_eq!(l.peek(), FaultFlags::BUS_ERROR);
+        h.bus.bus_error();
+        h.detector.clear_reported(seen);
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
+        h.can_tx.frame_lost();
+        assert!(h.detector.latched().contains(FaultFlags::TX_DROPPED));
+        let c = h.detector.counters();
+        assert_eq!((c.tx_lost.get(), c.adc_overruns.get()), (1, 1));
     }
 
     #[test]
-    fn counters_saturate() {
-        let c = Counter::new();
-        c.add(3);
-        c.add(u32::MAX);
-        assert_eq!(c.get(), u32::MAX);
-        c.set(7);
-        assert_eq!(c.get(), 7);
+    fn counters_saturate_and_each_task_writes_its_own() {
+        let mut s = Shared::new();
+        let mut h = s.split();
+        h.can_rx.frame_received();
+        h.sampler.set_lost_samples(u32::MAX);
+        h.sampler.set_lost_samples(u32::MAX);
+        h.bus.set_state_events(u32::MAX - 1);
+        h.can_rx.protocol_error();
+        h.can_rx.protocol_error();
+        let c = h.detector.counters();
+        assert_eq!(c.rx_frames.get(), 1);
+        assert_eq!(c.lost_samples.get(), u32::MAX);
+        assert_eq!(c.rx_protocol_errors.get(), 2);
+        assert_eq!(c.bus_errors(), u32::MAX, "the sum saturates");
+        assert_eq!(c.rail_episodes.get(), 0);
     }
 
     #[test]
-    fn shared_state_round_trips() {
-        let s = Shared::new();
-        assert_eq!(s.temperature(), None);
-        s.set_temperature(Some(Signal::from_f64(21.5)));
-        assert_eq!(s.temperature(), Some(Signal::from_f64(21.5)));
-        s.now.store(42, Ordering::Relaxed);
-        assert_eq!(s.now(), 42);
-        assert!(s.with_rx(|rx| rx.link().context().is_none()));
+    fn the_temperature_reaches_its_readers() {
+        let mut s = Shared::new();
+        let mut h = s.split();
+        assert_eq!(h.sampler.temperature(), None);
+        assert!(!h.detector.sensor_fault());
+        let mut health = SensorHealth::new(1);
+        health.record::<embedded_hal::i2c::ErrorKind>(Ok(Some(Signal::from_f64(21.5))));
+        h.temperature.publish(&health);
+        assert_eq!(h.sampler.temperature(), Some(Signal::from_f64(21.5)));
+        // Read again: still the newest value.
+        assert_eq!(h.sampler.temperature(), Some(Signal::from_f64(21.5)));
+        health.record::<embedded_hal::i2c::ErrorKind>(Err(&crate::tmp117::Error::Timeout));
+        h.temperature.publish(&health);
+        assert_eq!(h.sampler.temperature(), None);
+        assert!(h.detector.sensor_fault());
+        assert_eq!(h.detector.counters().sensor_timeouts.get(), 1);
+    }
+
+    #[test]
+    fn the_detectors_tick_is_the_receive_tasks_clock() {
+        let mut s = Shared::new();
+        let mut h = s.split();
+        h.detector.set_now(42);
+        assert_eq!(h.can_rx.now(), 42);
+        assert!(h.can_rx.rx().with(|rx| rx.link().context().is_none()));
+        h.sampler.check_in();
+        h.detector.check_in();
+        assert!(h.watchdog.round(Task::CRITICAL));
+        assert!(!h.watchdog.round(Task::CRITICAL));
     }
 }

@@ -300,13 +300,12 @@ impl SensorHealth {
 }
 
 /// One round of the temperature task: (re)initializes the sensor while it needs it,
-/// otherwise reads it; records the outcome; publishes the temperature (or `None` while
-/// faulty), the fault flag and the error counts in `shared`. Returns whether the fault
-/// flag changed, for the log.
+/// otherwise reads it, and records the outcome in `health` (the task then publishes
+/// [`SensorHealth::temperature`], the fault and the error counts). Returns whether the
+/// fault flag changed, for the log.
 pub async fn poll_sensor<I: I2c, D: DelayNs>(
     sensor: &mut Tmp117<I, D>,
     health: &mut SensorHealth,
-    shared: &crate::shared::Shared,
 ) -> bool {
     let was_faulty = health.is_faulty();
     if health.needs_init() {
@@ -316,12 +315,6 @@ pub async fn poll_sensor<I: I2c, D: DelayNs>(
         let r = sensor.read_celsius().await;
         health.record(r.as_ref().map(|t| Some(*t)));
     }
-    shared.set_temperature(health.temperature());
-    shared
-        .sensor_fault
-        .store(health.is_faulty(), core::sync::atomic::Ordering::Relaxed);
-    shared.counters.sensor_errors.set(health.errors().total());
-    shared.counters.sensor_timeouts.set(health.errors().timeout);
     health.is_faulty() != was_faulty
 }
 
@@ -512,7 +505,6 @@ mod tests {
     #[test]
     fn a_sensor_that_stops_answering_is_flagged_counted_and_recovers() {
         use crate::shared::Shared;
-        use core::sync::atomic::Ordering;
         let nack = ErrorKind::NoAcknowledge(NoAcknowledgeSource::Address);
         let temp = |raw: u16| Transaction::write_read(A, vec![0x00], raw.to_be_bytes().to_vec());
         let dead = || Transaction::write_read(A, vec![0x0F], vec![0, 0]).with_error(nack);
@@ -532,21 +524,27 @@ mod tests {
         let mut i2c = Mock::new(&expectations);
         let mut sensor = Tmp117::new(&mut i2c, Forever, A, 5);
         let mut health = SensorHealth::new(3);
-        let shared = Shared::new();
-        let mut poll = || block_on(poll_sensor(&mut sensor, &mut health, &shared));
+        let mut shared = Shared::new();
+        let mut h = shared.split();
+        // The temperature task's round: poll, then publish.
+        let mut poll = || {
+            let changed = block_on(poll_sensor(&mut sensor, &mut health));
+            h.temperature.publish(&health);
+            changed
+        };
         assert!(!poll()); // init
         assert!(!poll()); // 25 °C
-        assert_eq!(shared.temperature(), Some(Signal::from_f64(25.0)));
+        assert_eq!(h.sampler.temperature(), Some(Signal::from_f64(25.0)));
         assert!(!poll());
         assert!(!poll());
         assert!(poll(), "third failure in a row: faulty");
-        assert!(shared.sensor_fault.load(Ordering::Relaxed));
-        assert_eq!(shared.temperature(), None);
-        assert_eq!(shared.counters.sensor_errors.get(), 3);
+        assert!(h.detector.sensor_fault());
+        assert_eq!(h.sampler.temperature(), None);
+        assert_eq!(h.detector.counters().sensor_errors.get(), 3);
         assert!(!poll()); // init again: still faulty until a reading
         assert!(poll(), "a good reading clears the fault");
-        assert!(!shared.sensor_fault.load(Ordering::Relaxed));
-        assert_eq!(shared.temperature(), Some(Signal::from_f64(26.0)));
+        assert!(!h.detector.sensor_fault());
+        assert_eq!(h.sampler.temperature(), Some(Signal::from_f64(26.0)));
         i2c.done();
     }
 }

@@ -11,7 +11,7 @@
 pub const ADC_CHANNELS: [&str; 4] = ["force_x", "force_y", "skin_accel", "stress_rate"];
 
 /// Channels fed by the controller's context frame (desired velocity, desired
-/// acceleration), in the order of the core's `ControllerInputs`.
+/// acceleration), in the order of the protocol's `ControllerInputs`.
 pub const CONTEXT_CHANNELS: [&str; 4] = ["vel_des_x", "vel_des_y", "acc_des_x", "acc_des_y"];
 
 /// Channels fed by the controller's tip state frame (tip position error x, y).

@@ -8,11 +8,11 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use detector_core::can::{
+use detector_core::{Confidence, Decision, EventId, Level, Output};
+use fingertip_can::{
     ConfidenceMsg, ContextMsg, Counter, EventMsg, FaultFlags, Id, Message, NodeId, PhaseMsg,
     Receiver, ResetReason, RxState, Status, StatusPage, TipStateMsg, Transmitter, TxState,
 };
-use detector_core::{Confidence, Decision, EventId, Level, Output};
 
 const N: u32 = 1_000_000;
 

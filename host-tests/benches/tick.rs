@@ -15,11 +15,12 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use detector_core::{Config, Detector, Inputs, Output, State, Tick};
+use detector_build::Config;
+use detector_core::{Detector, DetectorTick, Inputs, Output, Tick};
+use fingertip::replay::channel_columns;
+use fingertip::sim::golden_runs;
 use fingertip_qemu::generated;
 use host_tests::reference::Model;
-use host_tests::replay::channel_columns;
-use host_tests::sim::golden_runs;
 
 /// Timed passes over the trace per model, after one warm-up pass.
 const PASSES: usize = 21;
@@ -34,8 +35,8 @@ struct Segment {
 }
 
 fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
-    let config = Config::from_toml(host_tests::APPROACH_TOML).map_err(|e| e.to_string())?;
-    let detector = Detector::build(&config).map_err(|e| e.to_string())?;
+    let config = Config::from_toml(fingertip::APPROACH_TOML).map_err(|e| e.to_string())?;
+    let detector = detector_build::build(&config).map_err(|e| e.to_string())?;
     if fingertip_qemu::detector().map_err(|e| e.to_string())? != detector {
         return Err("the generated tick was made from another configuration".into());
     }
@@ -69,27 +70,33 @@ fn load() -> Result<(Config, Detector, Vec<Segment>), String> {
 /// A tick model to time: runs one whole segment from a fresh state.
 type Timed<'a> = (&'static str, Box<dyn Fn(&Segment) + 'a>);
 
+/// A fixed-point tick to time: the same loop for the generated tick and the interpreter,
+/// so that only the tick differs.
+fn fixed<'a>(
+    name: &'static str,
+    detector: &'a Detector,
+    tick: &'a (impl DetectorTick + 'a),
+) -> Timed<'a> {
+    (
+        name,
+        Box::new(move |seg: &Segment| {
+            let mut state = detector.new_state();
+            let mut out = Output::default();
+            for (now, inputs) in &seg.ticks {
+                tick.tick_into(&mut state, *now, black_box(inputs), &mut out);
+                black_box(&out);
+            }
+        }),
+    )
+}
+
 fn models<'a>(detector: &'a Detector, model: &'a Model) -> Vec<Timed<'a>> {
-    // A fixed-point tick, through a function pointer in both cases so that only the tick
-    // differs.
-    let fixed = |name, tick: fn(&Detector, &mut State, Tick, &Inputs, &mut Output)| -> Timed {
-        (
-            name,
-            Box::new(move |seg: &Segment| {
-                let mut state = detector.new_state();
-                let mut out = Output::default();
-                for (now, inputs) in &seg.ticks {
-                    tick(detector, &mut state, *now, black_box(inputs), &mut out);
-                    black_box(&out);
-                }
-            }),
-        )
-    };
-    let compiled = fixed("fixed point, generated (the firmware's)", generated::tick);
-    let interpreted = fixed(
-        "fixed point, interpreted (Detector::tick_into)",
-        Detector::tick_into,
+    let compiled = fixed(
+        "fixed point, generated (the firmware's)",
+        detector,
+        &generated::ApproachTick,
     );
+    let interpreted = fixed("fixed point, interpreted (Detector)", detector, detector);
     let reference: Timed = (
         "f64 reference (host_tests::reference)",
         Box::new(move |seg: &Segment| {

@@ -1,10 +1,8 @@
 //! Prepares what the QEMU program embeds, on the PC:
 //!
-//! - `config.postcard`: `configs/approach.toml`, parsed and validated with detector-core's
-//!   `std` feature, serialized with postcard (the target decodes it with the `serde`
-//!   feature alone, no TOML parser on the chip);
-//! - `tick.rs`: the detector's tick generated from it (`Detector::to_rust`), the firmware's
-//!   way of running it;
+//! - `approach.image` and `approach_tick.rs`: the detector image of `configs/approach.toml`
+//!   (which the target loads in place, as the firmware does) and the tick generated from it
+//!   (`ApproachTick`), the firmware's way of running it, both by `detector_build::Generator`;
 //! - `trace.ftrc`: the inputs to replay, in the format of `src/trace.rs`: the file named by
 //!   `FINGERTIP_QEMU_TRACE` if set (the host test writes the simulator's golden runs there),
 //!   else a deterministic synthetic trace generated here;
@@ -17,7 +15,8 @@ use std::f64::consts::PI;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use detector_core::{Config, Detector};
+use detector_build::{Config, Generator};
+use detector_core::Detector;
 
 #[allow(dead_code)]
 #[path = "src/trace.rs"]
@@ -34,19 +33,10 @@ fn main() -> Result<()> {
     }
 
     let config_rel = "configs/approach.toml";
-    let config_path = manifest.join("../..").join(config_rel);
-    println!("cargo:rerun-if-changed={}", config_path.display());
-    let text = fs::read_to_string(&config_path)
-        .map_err(|e| format!("reading {}: {e}", config_path.display()))?;
-    let config = Config::from_toml(&text).map_err(|e| format!("{}: {e}", config_path.display()))?;
-    let bytes = postcard::to_allocvec(&config)?;
-    let back: Config = postcard::from_bytes(&bytes)?;
-    if back != config {
-        return Err("the configuration does not survive a postcard round trip".into());
-    }
-    fs::write(out.join("config.postcard"), &bytes)?;
-    let detector = Detector::build(&config).map_err(|e| format!("{config_rel}: {e}"))?;
-    fs::write(out.join("tick.rs"), detector.to_rust())?;
+    let generated = Generator::new(manifest.join("../..").join(config_rel))
+        .tick_type("ApproachTick")
+        .generate(&out)?;
+    let config = generated.config;
     println!("cargo:rustc-env=FINGERTIP_QEMU_CONFIG_SOURCE={config_rel}");
 
     println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_TRACE");
@@ -87,7 +77,7 @@ fn link_script(manifest: &Path) {
 /// paper's Table 1 (contact, link collision, disturbance, sudden acceleration) plus one
 /// run with faulty channels, 200 ms each at the configured rate, the event at 20 ms.
 fn synthetic(config: &Config) -> Result<Vec<u8>> {
-    let detector = Detector::build(config)?;
+    let detector: Detector = detector_build::build(config)?;
     let names: Vec<&str> = config.channels.iter().map(|c| c.name.as_str()).collect();
     let idx = |n: &str| -> Result<usize> {
         names

@@ -45,7 +45,8 @@
 //!   run of confidence strictly above `onset_level`. Switching to another phase lowers every
 //!   level and forgets onsets; only the active phase's events are evaluated.
 
-use detector_core::{CdfSpec, Config, Level, StageSpec, Window};
+use detector_build::Config;
+use detector_core::{CdfSpec, Level, StageSpec, Window};
 
 /// The largest value of the core's 16.16 `Signal`, 32768 − 2⁻¹⁶.
 pub const SIGNAL_MAX: f64 = 32768.0 - 1.0 / 65536.0;
@@ -389,7 +390,7 @@ impl Model {
                 .position(|g| *g == name)
                 .ok_or_else(|| ModelError(name.to_string()))
         };
-        let level = |l: &detector_core::LevelSpec| LevelParams {
+        let level = |l: &detector_build::LevelSpec| LevelParams {
             on: f64::from(l.on),
             off: f64::from(l.off),
             dwell: dwell_ticks(l.dwell_ms, config.rate_hz),

@@ -18,12 +18,12 @@
 
 #![allow(clippy::unwrap_used, reason = "test code: a panic is the failure")]
 
-use detector_core::can::{
+use detector_core::{Confidence, Decision, EventId, Level, Output, Tick};
+use fingertip_can::{
     Accepted, CanFrame, ConfidenceMsg, ContextMsg, Counter, EventMsg, ExtendedId, FaultFlags, Id,
     Message, MessageKind, NodeId, PhaseMsg, REJECT_REASONS, Receiver, RejectReason, ResetReason,
     RxState, StandardId, Status, StatusPage, TipStateMsg, Transmitter, TxState, e2e,
 };
-use detector_core::{Confidence, Decision, EventId, Level, Output, Tick};
 use proptest::prelude::*;
 
 fn config(cases: u32) -> ProptestConfig {

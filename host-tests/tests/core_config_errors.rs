@@ -1,15 +1,15 @@
-//! Configuration validation as issue 2 asks: each bad input is rejected with an error naming
-//! the item and the value (in the error and in its `Display` text), and a rejected
-//! configuration changes nothing. Also the TOML layer: syntax errors with their line,
+//! Configuration validation: each bad input is rejected with an error naming the item and
+//! the value (in the error and in its `Display` text), and a rejected configuration changes
+//! nothing. Also the TOML layer: syntax errors with their line,
 //! unknown fields, and invalid-but-well-formed files.
 
 #[path = "reference_support.rs"]
 mod support;
 
-use detector_core::config::LoadError;
-use detector_core::{
-    CdfError, CdfSpec, Config, ConfigError, Detector, Item, Problem, StageError, StageSpec, Window,
-};
+use detector_build::LoadError;
+use detector_build::{Config, ConfigError, Item, Problem, Warning};
+use detector_core::{CdfError, CdfSpec, StageError, StageSpec, Window};
+use proptest::prelude::*;
 use support::*;
 
 /// A valid configuration: channels `a b`, features `fa` (raw a), `fb` (raw b), event `e` with
@@ -37,7 +37,7 @@ fn reject(change: impl FnOnce(&mut Config), words: &[&str]) -> ConfigError {
     let mut bad = good();
     change(&mut bad);
     let before = bad.clone();
-    let err = Detector::build(&bad).expect_err("must be rejected");
+    let err = detector_build::build(&bad).expect_err("must be rejected");
     assert_eq!(
         format!("{bad:?}"),
         format!("{before:?}"),
@@ -56,7 +56,7 @@ fn item_sensor(e: &str, f: &str) -> Item {
 
 #[test]
 fn the_good_config_builds() {
-    assert!(Detector::build(&good()).is_ok());
+    assert!(detector_build::build(&good()).is_ok());
 }
 
 #[test]
@@ -290,7 +290,7 @@ fn a_window_longer_than_supported() {
         );
     }
     assert!(
-        Detector::build(&{
+        detector_build::build(&{
             let mut c = good();
             c.features[0].stage = ste(128);
             c
@@ -302,12 +302,10 @@ fn a_window_longer_than_supported() {
         |c| {
             c.features[0].stage = ste(128);
             c.features[1].stage = ste(128);
-            c.features
-                .push(detector_core::FeatureSpec {
-                    name: name("fc"),
-                    stage: ste(128),
-                })
-                .expect("fits");
+            c.features.push(detector_build::FeatureSpec {
+                name: name("fc"),
+                stage: ste(128),
+            });
         },
         &["feature 'fc'", "384"],
     );
@@ -337,15 +335,12 @@ fn a_duplicate_name() {
     let e = reject(
         |c| {
             let again = c.events[0].clone();
-            c.events.push(again).expect("fits");
+            c.events.push(again);
         },
         &["event 'e'", "twice"],
     );
     assert_eq!(e.item, Item::Event(name("e")));
-    let e = reject(
-        |c| c.phases.push(phase("p", &[])).expect("fits"),
-        &["phase 'p'", "twice"],
-    );
+    let e = reject(|c| c.phases.push(phase("p", &[])), &["phase 'p'", "twice"]);
     assert_eq!(e.item, Item::Phase(name("p")));
 }
 
@@ -403,7 +398,7 @@ fn other_rules() {
 /// run over the same inputs with failed builds in between, gives identical outputs.
 #[test]
 fn a_rejected_config_changes_nothing() {
-    let det = Detector::build(&good()).expect("valid");
+    let det = detector_build::build(&good()).expect("valid");
     let mut bad = good();
     bad.events[0].sensor[0].weight = 2.0;
     let run = |interleave: bool| {
@@ -411,7 +406,7 @@ fn a_rejected_config_changes_nothing() {
         (0..20)
             .map(|t| {
                 if interleave {
-                    assert!(Detector::build(&bad).is_err());
+                    assert!(detector_build::build(&bad).is_err());
                 }
                 det.tick(&mut st, t, &inputs_f64(&[f64::from(t) / 10.0, 0.7], 0))
             })
@@ -484,14 +479,179 @@ fn full_events(cdf: impl Fn(usize, usize) -> CdfSpec) -> Config {
 #[test]
 fn terms_alike_count_once_against_the_distinct_term_limit() {
     // 128 terms, one distinct pair: builds.
-    assert!(Detector::build(&full_events(|_, _| sigmoid(0.0, 1.0))).is_ok());
+    assert!(detector_build::build(&full_events(|_, _| sigmoid(0.0, 1.0))).is_ok());
     // 64 distinct pairs: each event's context term k and sensor term k + 8 are alike.
     let per_event = |i: usize, k: usize| sigmoid(0.0, 1.0 + (i * 8 + k % 8) as f32);
-    assert!(Detector::build(&full_events(per_event)).is_ok());
+    assert!(detector_build::build(&full_events(per_event)).is_ok());
     // 128 distinct pairs: the 65th, event e4's first context term, is rejected by name.
-    let err = Detector::build(&full_events(|i, k| sigmoid(0.0, 1.0 + (i * 16 + k) as f32)))
+    let err = detector_build::build(&full_events(|i, k| sigmoid(0.0, 1.0 + (i * 16 + k) as f32)))
         .expect_err("more distinct terms than the detector holds");
     assert_eq!(err.item, Item::ContextTerm(name("e4"), name("fa")));
     assert_eq!(err.problem, Problem::DistinctTerms(64));
     assert!(err.to_string().contains("more than 64 distinct"), "{err}");
+}
+
+/// Sets the name of the first item of one kind (0 channel, 1 feature, 2 event, 3 phase),
+/// keeping every reference to it, and gives the item the error must name.
+fn rename(c: &mut Config, kind: usize, to: &str) -> Item {
+    let to = to.to_owned();
+    match kind {
+        0 => {
+            c.channels[0].name = to.clone();
+            c.features[0].stage = raw(&to);
+            Item::Channel(to)
+        }
+        1 => {
+            c.features[0].name = to.clone();
+            c.events[0].sensor[0].feature = to.clone();
+            Item::Feature(to)
+        }
+        2 => {
+            c.events[0].name = to.clone();
+            c.phases[0].events[0] = to.clone();
+            Item::Event(to)
+        }
+        _ => {
+            c.phases[0].name = to.clone();
+            Item::Phase(to)
+        }
+    }
+}
+
+/// Names are letters, digits, '_' and '-', 1 to 24 bytes, and not a trace column: every
+/// other name, of every kind of item, is refused naming the item (a name with a comma or a
+/// newline would break the CSV files the tools write).
+#[test]
+fn names_outside_the_allowed_set() {
+    let too_long = "n".repeat(25);
+    let table: [(&str, Problem); 9] = [
+        ("a,b", Problem::NameCharacter(',')),
+        ("a\nb", Problem::NameCharacter('\n')),
+        ("a b", Problem::NameCharacter(' ')),
+        ("caf\u{e9}", Problem::NameCharacter('\u{e9}')),
+        ("bell\u{7}", Problem::NameCharacter('\u{7}')),
+        (&too_long, Problem::NameLength(25)),
+        ("t", Problem::ReservedName),
+        ("phase", Problem::ReservedName),
+        ("truth", Problem::ReservedName),
+    ];
+    for kind in 0..4 {
+        for (bad, problem) in &table {
+            let mut c = good();
+            let item = rename(&mut c, kind, bad);
+            let before = c.clone();
+            let err = detector_build::build(&c).expect_err(bad);
+            assert_eq!(c, before);
+            assert_eq!(err.item, item, "{bad:?}");
+            assert_eq!(&err.problem, problem, "{bad:?}");
+        }
+        let mut c = good();
+        rename(&mut c, kind, "Tip-force_2");
+        assert!(detector_build::build(&c).is_ok(), "a good name refused");
+    }
+    let err = reject(
+        |c| c.channels[0].unit = "metres per second".into(),
+        &["channel 'a'", "unit"],
+    );
+    assert_eq!(err.problem, Problem::Unit);
+}
+
+proptest! {
+    /// Any name holding a character outside the set is refused, naming the character.
+    #[test]
+    fn any_name_with_a_foreign_character_is_refused(
+        head in "[a-z]{0,5}",
+        bad in any::<char>().prop_filter("outside the set", |c| !(c.is_ascii_alphanumeric() || *c == '_' || *c == '-')),
+        kind in 0usize..4,
+    ) {
+        let mut c = good();
+        rename(&mut c, kind, &format!("{head}{bad}"));
+        let err = detector_build::build(&c).expect_err("refused");
+        prop_assert_eq!(err.problem, Problem::NameCharacter(bad));
+    }
+}
+
+/// A list longer than a detector holds is refused with the limit, not a parser's
+/// "invalid length".
+#[test]
+fn too_many_items_name_the_limit() {
+    let channels: Vec<String> = (0..17).map(|k| format!("c{k}")).collect();
+    let names: Vec<&str> = channels.iter().map(String::as_str).collect();
+    let mut c = good();
+    let extra = config(1000.0, &names, Vec::new(), Vec::new(), Vec::new());
+    c.channels = extra.channels;
+    let err = detector_build::build(&c).expect_err("17 channels");
+    assert_eq!(err.problem, Problem::TooMany("channel", 17, 16));
+    assert!(
+        err.to_string().contains("17 channels, more than the 16"),
+        "{err}"
+    );
+    let err = reject(
+        |c| {
+            let term = c.events[0].context[0].clone();
+            c.events[0].context = vec![term; 9];
+        },
+        &["event 'e'", "9 context terms, more than the 8"],
+    );
+    assert_eq!(err.problem, Problem::TooMany("context term", 9, 8));
+    let toml: String = std::iter::once(good().to_toml())
+        .chain((0..15).map(|k| format!("\n[[channel]]\nname = \"c{k}\"\nunit = \"N\"\n")))
+        .collect();
+    match Config::from_toml(&toml) {
+        Err(LoadError::Invalid(e)) => assert_eq!(e.problem, Problem::TooMany("channel", 17, 16)),
+        other => panic!("expected the channel limit, got {other:?}"),
+    }
+}
+
+/// A 2-vector takes exactly two inputs: a third is refused, not dropped.
+#[test]
+fn fixed_arity_lists_are_checked() {
+    let text = good().to_toml();
+    let base = "[feature.stage.raw]\ninput = \"b\"";
+    assert!(text.contains(base), "{text}");
+    for (of, ok) in [
+        ("[\"a\", \"b\"]", true),
+        ("[\"a\", \"b\", \"a\"]", false),
+        ("[\"a\"]", false),
+    ] {
+        let changed = text.replacen(base, &format!("[feature.stage.magnitude]\nof = {of}"), 1);
+        match Config::from_toml(&changed) {
+            Ok(_) => assert!(ok, "{of} accepted"),
+            Err(e) => {
+                assert!(!ok, "{of}: {e}");
+                assert!(e.to_string().contains("exactly two"), "{e}");
+            }
+        }
+    }
+    let dot = "[feature.stage.dot]\na = [\"a\", \"b\", \"a\"]\nb = [\"a\", \"b\"]";
+    let err = Config::from_toml(&text.replacen(base, dot, 1)).expect_err("three inputs");
+    assert!(err.to_string().contains("exactly two"), "{err}");
+}
+
+/// What is legal but probably a mistake is compiled, with a warning naming it.
+#[test]
+fn an_event_in_no_phase_and_a_phase_without_events_are_warned_of() {
+    let mut c = good();
+    c.phases.push(phase("idle", &[]));
+    let mut second = c.events[0].clone();
+    second.name = name("unused");
+    c.events.push(second);
+    let compiled = detector_build::compile(&c).expect("legal");
+    assert_eq!(
+        compiled.warnings,
+        vec![
+            Warning::EventInNoPhase(name("unused")),
+            Warning::PhaseWithoutEvents(name("idle"))
+        ]
+    );
+    assert_eq!(
+        compiled.warnings[0].to_string(),
+        "event 'unused' is in no phase, so it is never evaluated"
+    );
+    assert!(
+        detector_build::compile(&good())
+            .expect("good")
+            .warnings
+            .is_empty()
+    );
 }

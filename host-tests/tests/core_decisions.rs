@@ -9,7 +9,8 @@
 #[path = "reference_support.rs"]
 mod support;
 
-use detector_core::{Config, Detector, EventSpec, Level, Output, StageSpec};
+use detector_build::{Config, EventSpec};
+use detector_core::{Level, Output, StageSpec};
 use host_tests::reference::{Model, ModelOutput};
 use support::*;
 
@@ -61,7 +62,7 @@ type Raised = (u32, Level, u32);
 /// Runs a script on the engine and the model; returns the engine's outputs after checking
 /// that the model raised the same levels and reports the same sets.
 fn run(config: &Config, script: &[Tick]) -> Vec<Output> {
-    let det = Detector::build(config).expect("valid");
+    let det = detector_build::build(config).expect("valid");
     let model = Model::new(config).expect("resolves");
     let mut st = det.new_state();
     let mut ms = model.new_state();
@@ -365,7 +366,7 @@ fn faults_follow_feature_chains() {
             .collect::<Vec<_>>(),
         [(0, 0), (1, 0), (0, 0), (0, 1)]
     );
-    let det = Detector::build(&c).expect("valid");
+    let det = detector_build::build(&c).expect("valid");
     let e = det.event("e").expect("event");
     assert_eq!(det.event_channels(e), 0b101);
 }

@@ -1,7 +1,7 @@
 //! The detector core on an emulated Cortex-M4 (issue 6): bit-exact with the PC, and its cost
 //! per tick.
 //!
-//! The inputs are golden traces from the simulator (`host_tests::sim`): the 13 runs of the
+//! The inputs are golden traces from the simulator (`fingertip::sim`): the 13 runs of the
 //! paper's Table 1 (contacts, link collisions, disturbances, sudden accelerations, nominal
 //! parameters, seed 0) and one second of event-free motion, at the configured rate, followed
 //! by the synthetic runs `fingertip-qemu`'s build script generates (one with faulty channels,
@@ -37,11 +37,11 @@ use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
-use detector_core::{Config, Detector};
+use detector_build::Config;
+use fingertip::replay::channel_columns;
+use fingertip::sim::golden_runs;
 use fingertip_qemu::replay::{SegmentLine, plain_tick, replay, staged_tick};
 use fingertip_qemu::trace::{Encoder, Trace};
-use host_tests::replay::channel_columns;
-use host_tests::sim::golden_runs;
 
 /// Most instructions one tick may take (issue 6), enforced.
 const BUDGET: u32 = 1_500;
@@ -132,8 +132,8 @@ fn target_installed() -> bool {
 
 /// The inputs: the simulator's golden runs, then `fingertip-qemu`'s synthetic ones.
 fn golden_trace() -> Result<Vec<u8>, String> {
-    let config = Config::from_toml(host_tests::APPROACH_TOML).map_err(|e| e.to_string())?;
-    let detector = Detector::build(&config).map_err(|e| e.to_string())?;
+    let config = Config::from_toml(fingertip::APPROACH_TOML).map_err(|e| e.to_string())?;
+    let detector = detector_build::build(&config).map_err(|e| e.to_string())?;
     let names: Vec<&str> = config.channels.iter().map(|c| c.name.as_str()).collect();
     let synthetic = Trace::parse(fingertip_qemu::TRACE).map_err(|e| e.to_string())?;
     if synthetic.channels() != names.len() {
@@ -695,8 +695,8 @@ fn check_tick_path(funcs: &BTreeMap<String, Function>, roots: &[&str]) -> Result
 /// (faulty channels included), whole and stage by stage.
 #[test]
 fn generated_tick_matches_the_interpreter() {
-    use detector_core::Output;
-    use fingertip_qemu::generated;
+    use detector_core::{DetectorTick, Output};
+    use fingertip_qemu::generated::ApproachTick;
     let bytes = golden_trace().expect("the golden trace");
     let trace = Trace::parse(&bytes).expect("parses");
     let detector = fingertip_qemu::detector().expect("the embedded configuration");
@@ -706,7 +706,7 @@ fn generated_tick_matches_the_interpreter() {
         &detector,
         &trace,
         |s, now, inputs, _| {
-            generated::tick(&detector, s, now, inputs, &mut out);
+            ApproachTick.tick_into(s, now, inputs, &mut out);
             out.clone()
         },
         |_| {},
@@ -714,14 +714,7 @@ fn generated_tick_matches_the_interpreter() {
     let staged = replay(
         &detector,
         &trace,
-        |s, now, inputs, _| {
-            let mut out = Output::default();
-            generated::update_features(&detector, s, inputs);
-            generated::term_confidences(&detector, s, inputs.faults, &mut out);
-            generated::combine(&detector, s, &mut out);
-            generated::decide(&detector, s, now, &mut out);
-            out
-        },
+        |s, now, inputs, _| staged_tick(&ApproachTick, s, now, inputs),
         |_| {},
     );
     assert!(interpreted.ticks > 0 && interpreted.confirms > 0);
@@ -737,21 +730,28 @@ fn qemu_digest_matches_the_host() {
     let path = workspace_root().join("configs/approach.toml");
     let text = std::fs::read_to_string(&path).expect("configs/approach.toml");
     let config = Config::from_toml(&text).expect("approach.toml is valid");
+    let image = detector_build::compile(&config)
+        .expect("approach.toml compiles")
+        .image();
     assert_eq!(
-        fingertip_qemu::config().expect("the embedded configuration decodes"),
-        config,
-        "the configuration the program embeds is not configs/approach.toml's"
+        fingertip_qemu::IMAGE,
+        &image[..],
+        "the detector image the program embeds is not configs/approach.toml's"
     );
-    let mut crc = fingertip_qemu::digest::Crc32::new();
-    crc.update(fingertip_qemu::CONFIG_POSTCARD);
+    let crc = detector_build::image_crc(&image);
     let header = fields(&report.header);
     assert_eq!(
-        header.get("config_crc"),
-        Some(&format!("{:08x}", crc.value())),
-        "the program embeds other configuration bytes than the host's: {}",
+        header.get("image_crc"),
+        Some(&format!("{crc:08x}")),
+        "the program runs another detector image than the host's: {}",
         report.header
     );
-    let detector = Detector::build(&config).expect("approach.toml builds");
+    assert_eq!(
+        detector_core::DetectorTick::image_crc(&fingertip_qemu::generated::ApproachTick),
+        Some(crc),
+        "the generated tick was generated from another image"
+    );
+    let detector = detector_build::build(&config).expect("approach.toml builds");
     let trace = Trace::parse(&run.trace).expect("the golden trace");
     let mut segments = Vec::new();
     let host = replay(&detector, &trace, plain_tick(&detector), |r| {
@@ -972,7 +972,7 @@ fn forbidden_names() {
 }
 
 const FAKE_REPORT: &str = "\
-fingertip-qemu config=configs/approach.toml config_crc=00000000 trace=synthetic segments=1 ticks=2
+fingertip-qemu config=configs/approach.toml image_crc=00000000 trace=synthetic segments=1 ticks=2
 calibration nops=4096 counts=104858 overhead=1 check256=256
 segment 0 a start=0 ticks=2 contact=alert@-,confirm@-
 digest tick: inputs=00000000 features=00000000 terms=00000000 outputs=00000000 ticks=2

@@ -63,7 +63,8 @@ mod support;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use detector_core::{CdfSpec, Config, Detector, EventSpec, Name, Signal, StageSpec, Window};
+use detector_build::{Config, EventSpec};
+use detector_core::{CdfSpec, Signal, StageSpec, Window};
 use host_tests::reference::{Model, cdf};
 use proptest::prelude::*;
 use support::*;
@@ -243,7 +244,7 @@ fn stage_for(
     rate_hz: f32,
     integer_rate: bool,
     pool: &mut usize,
-) -> (StageSpec<Name>, SlotInfo) {
+) -> (StageSpec<String>, SlotInfo) {
     let pick = |i: usize| usize::from(p.picks[i]) % names.len();
     let n = |s: usize| name(&names[s]);
     let bound_cap = |b: f64| b.min(32768.0);
@@ -485,7 +486,7 @@ fn realize(plan: &Plan) -> (Config, Vec<Step>, Vec<f64>) {
         })
         .collect();
     let ch: Vec<&str> = channel_names.iter().map(String::as_str).collect();
-    let feats: Vec<(&str, StageSpec<Name>)> = features
+    let feats: Vec<(&str, StageSpec<String>)> = features
         .iter()
         .map(|(n, s)| (n.as_str(), s.clone()))
         .collect();
@@ -543,7 +544,7 @@ proptest! {
     #[test]
     fn engine_stays_within_bound_of_model(plan in plan()) {
         let (config, steps, delta) = realize(&plan);
-        let det = Detector::build(&config);
+        let det = detector_build::build(&config);
         prop_assert!(det.is_ok(), "generated config rejected: {:?}", det.err());
         for (t, b) in run_both(&config, &steps).iter().enumerate() {
             let (out, m) = (&b.out, &b.model);
@@ -558,7 +559,7 @@ proptest! {
                 }
                 // A binary term whose feature is within its error of the threshold may
                 // legitimately flip: skip that term, and the event, at this tick.
-                let near = |f: &Name, c: &CdfSpec| match c {
+                let near = |f: &str, c: &CdfSpec| match c {
                     CdfSpec::Binary { threshold, .. } => {
                         let k = feature_index(&config, f);
                         delta[k] > 0.0
@@ -633,7 +634,7 @@ proptest! {
     #[test]
     fn engine_decisions_equal_model_decisions_on_engine_confidences(plan in plan()) {
         let (config, steps, _) = realize(&plan);
-        let det = Detector::build(&config).map_err(|e| TestCaseError::fail(e.to_string()))?;
+        let det = detector_build::build(&config).map_err(|e| TestCaseError::fail(e.to_string()))?;
         let model = Model::new(&config).expect("model resolves");
         let mut st = det.new_state();
         let mut ms = model.new_state();

@@ -10,7 +10,8 @@
 #[path = "reference_support.rs"]
 mod support;
 
-use detector_core::{CdfSpec, Config, Detector, EventId};
+use detector_build::Config;
+use detector_core::{CdfSpec, EventId};
 use host_tests::reference::{Model, combine};
 use support::*;
 
@@ -20,7 +21,7 @@ fn s04() -> CdfSpec {
 }
 
 /// Channels `a b c d`, raw features `fa fb fc fd` of them, and the given event.
-fn raw_config(e: detector_core::EventSpec) -> Config {
+fn raw_config(e: detector_build::EventSpec) -> Config {
     config(
         1000.0,
         &["a", "b", "c", "d"],
@@ -40,7 +41,7 @@ fn raw_config(e: detector_core::EventSpec) -> Config {
 /// within 1 LSB, and the model's against `want` to 1e-7 (the model uses the `f32` weights
 /// exactly: 0.3f32 is 0.30000001…).
 fn check(config: &Config, samples: [f64; 4], want: f64, terms: &[f64], lsb: f64) {
-    let det = Detector::build(config).expect("valid");
+    let det = detector_build::build(config).expect("valid");
     let mut st = det.new_state();
     let out = det.tick(&mut st, 0, &inputs_f64(&samples, 0));
     let got = out.confidences[0].to_f64();

@@ -26,7 +26,8 @@
 #[path = "reference_support.rs"]
 mod support;
 
-use detector_core::{Config, Name, Signal, StageSpec, Window};
+use detector_build::Config;
+use detector_core::{Signal, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -36,7 +37,7 @@ const CASES: u32 = 128;
 const LSB: f64 = 1.0 / 65536.0;
 
 /// A configuration with channels `x y z w` and the given features (one event on the first).
-fn features_config(rate_hz: f32, features: Vec<(&str, StageSpec<Name>)>) -> Config {
+fn features_config(rate_hz: f32, features: Vec<(&str, StageSpec<String>)>) -> Config {
     let first = features[0].0.to_string();
     config(
         rate_hz,
@@ -77,7 +78,7 @@ fn samples(kmin: u32, kmax: u32, len: usize) -> impl Strategy<Value = Vec<[i32; 
     })
 }
 
-fn stage(kind: &str) -> StageSpec<Name> {
+fn stage(kind: &str) -> StageSpec<String> {
     match kind {
         "abs" => StageSpec::Abs { input: name("x") },
         "difference" => StageSpec::Difference {

@@ -30,7 +30,7 @@ mod support;
 
 use std::fmt::Write as _;
 
-use detector_core::{Config, Detector};
+use detector_build::Config;
 use host_tests::reference::Model;
 use support::*;
 
@@ -67,7 +67,7 @@ impl Noise {
 /// to 16.16 as the engine's `Detector::sample_from_si` does (so the model sees exactly the
 /// engine's inputs).
 fn synthetic_run() -> Vec<Vec<f64>> {
-    let det = Detector::build(&approach()).expect("valid");
+    let det = detector_build::build(&approach()).expect("valid");
     let rate = 5000.0;
     let mut noise = Noise(0x5eed);
     (0..TICKS)
@@ -126,7 +126,7 @@ fn synthetic_run() -> Vec<Vec<f64>> {
 
 /// The engine's run as golden text.
 fn golden_text(config: &Config, rows: &[Vec<f64>]) -> String {
-    let det = Detector::build(config).expect("valid");
+    let det = detector_build::build(config).expect("valid");
     let mut st = det.new_state();
     let events = det.events();
     let mut text = String::new();
@@ -217,7 +217,7 @@ fn model_stays_within_bound_on_the_golden_run() {
     let rows = synthetic_run();
     let delta = slot_errors(&config, &stats(&model_series(&config, &rows)));
     let channels = config.channels.len();
-    let det = Detector::build(&config).expect("valid");
+    let det = detector_build::build(&config).expect("valid");
     let model = Model::new(&config).expect("resolves");
     let mut st = det.new_state();
     let mut ms = model.new_state();

@@ -1,6 +1,6 @@
 //! Every run is seeded: the same scenario, options and seed give an identical trace.
 
-use host_tests::sim::{self, Scenario, SimOptions};
+use fingertip::sim::{self, Scenario, SimOptions};
 
 fn opts(seed: u64, randomize: bool) -> SimOptions {
     SimOptions {

@@ -1,6 +1,6 @@
 //! The documented parameter ranges are the ones the code draws from.
 
-use host_tests::sim::{CHANNELS, params};
+use fingertip::sim::{CHANNELS, params};
 
 fn doc() -> String {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/simulator.md");

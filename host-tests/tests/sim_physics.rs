@@ -1,8 +1,8 @@
 //! Physical sanity of the simulator: the signatures the paper's features rely on (section
 //! 3.2) must be there, in nominal runs and in randomized ones.
 
-use host_tests::sim::{self, Scenario, SimOptions};
-use host_tests::trace::Trace;
+use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::trace::Trace;
 
 fn run(s: Scenario, seed: u64, randomize: bool) -> Trace {
     sim::simulate(

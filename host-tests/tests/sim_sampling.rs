@@ -1,7 +1,7 @@
 //! Sampling: the anti-alias filter before decimation, the detector rate as a parameter,
 //! the channels' full scales, and bad options.
 
-use host_tests::sim::{self, CHANNELS, Scenario, SimError, SimOptions};
+use fingertip::sim::{self, CHANNELS, Scenario, SimError, SimOptions};
 use std::f64::consts::TAU;
 
 fn tone(freq: f64, rate: f64, n: usize) -> Vec<f64> {

@@ -1,8 +1,8 @@
 //! Trace files on disk: simulated traces round-trip, recorded data with other channels
 //! loads, and bad files give one clear line.
 
-use host_tests::sim::{self, Scenario, SimOptions};
-use host_tests::trace::Trace;
+use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::trace::Trace;
 use std::path::PathBuf;
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -69,7 +69,7 @@ fn bad_file_names_file_line_and_column() {
 }
 
 mod never_panics {
-    use host_tests::trace::Trace;
+    use fingertip::trace::Trace;
     use proptest::prelude::*;
 
     proptest! {

@@ -4,20 +4,20 @@
 #![warn(missing_docs)]
 
 pub mod digest;
-/// The approach detector's tick generated at build time (`Detector::to_rust`): bit for
-/// bit the interpreter's, for the detector [`detector`] builds.
+/// The approach detector's tick generated at build time (`ApproachTick`): bit for bit the
+/// interpreter's, for the detector [`detector`] loads.
 #[allow(missing_docs, clippy::all)]
 pub mod generated {
-    include!(concat!(env!("OUT_DIR"), "/tick.rs"));
+    include!(concat!(env!("OUT_DIR"), "/approach_tick.rs"));
 }
 pub mod replay;
 pub mod trace;
 
-use detector_core::{Config, ConfigError, Detector};
+use detector_core::{Detector, ImageError};
 
-/// The approach configuration (`configs/approach.toml`, parsed on the PC by `build.rs`) as
-/// postcard bytes.
-pub static CONFIG_POSTCARD: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/config.postcard"));
+/// The image of the approach detector (`configs/approach.toml`, compiled on the PC by
+/// `build.rs`), which the program loads in place as the firmware does.
+pub static IMAGE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/approach.image"));
 
 /// The configuration file the build read, relative to the workspace root.
 pub const CONFIG_SOURCE: &str = env!("FINGERTIP_QEMU_CONFIG_SOURCE");
@@ -29,30 +29,9 @@ pub static TRACE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/trace.ftrc")
 /// `FINGERTIP_QEMU_TRACE` at build time.
 pub const TRACE_SOURCE: &str = env!("FINGERTIP_QEMU_TRACE_SOURCE");
 
-/// Why the embedded configuration could not become a detector.
-#[derive(Debug)]
-pub enum LoadError {
-    /// The postcard bytes do not decode as a [`Config`].
-    Postcard(postcard::Error),
-    /// The configuration decoded but does not validate.
-    Config(ConfigError),
-}
-
-impl core::fmt::Display for LoadError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            LoadError::Postcard(e) => write!(f, "embedded configuration: {e}"),
-            LoadError::Config(e) => write!(f, "embedded configuration: {e}"),
-        }
-    }
-}
-
-/// Decodes [`CONFIG_POSTCARD`].
-pub fn config() -> Result<Config, LoadError> {
-    postcard::from_bytes(CONFIG_POSTCARD).map_err(LoadError::Postcard)
-}
-
-/// Decodes [`CONFIG_POSTCARD`] and builds the detector, as the target does.
-pub fn detector() -> Result<Detector, LoadError> {
-    Detector::build(&config()?).map_err(LoadError::Config)
+/// Loads [`IMAGE`], as the target does.
+pub fn detector() -> Result<Detector, ImageError> {
+    let mut detector = Detector::empty();
+    detector.load_image(IMAGE)?;
+    Ok(detector)
 }

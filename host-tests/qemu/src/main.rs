@@ -1,6 +1,6 @@
 //! The QEMU program: the approach detector on an emulated Cortex-M4 (`mps2-an386`).
 //!
-//! It decodes the embedded configuration, replays the embedded trace twice and prints, over
+//! It loads the embedded detector image, replays the embedded trace three times and prints, over
 //! semihosting, one `key=value` line per result (the host test parses them):
 //!
 //! 1. through [`fingertip_tick`], the tick generated for the configuration at build time
@@ -8,7 +8,7 @@
 //! 2. through its four stage functions ([`fingertip_update_features`],
 //!    [`fingertip_term_confidences`], [`fingertip_combine`], [`fingertip_decide`]), timing
 //!    each;
-//! 3. through [`fingertip_tick_interpreted`], the interpreter (`Detector::tick_into`),
+//! 3. through [`fingertip_tick_interpreted`], the interpreter (`Detector` as a `DetectorTick`),
 //!    timing each call.
 //!
 //! The three digests must equal the one the PC computes with the interpreter.
@@ -33,25 +33,25 @@ mod target {
     use cortex_m::peripheral::syst::SystClkSource;
     use cortex_m_rt::{ExceptionFrame, entry, exception};
     use cortex_m_semihosting::{debug, hprintln};
-    use detector_core::{ChannelMask, Detector, Inputs, Output, State, Tick};
+    use detector_core::{ChannelMask, Detector, DetectorTick, Inputs, Output, State, Tick};
     use fingertip_qemu::digest::{Crc32, Digest};
-    use fingertip_qemu::generated;
+    use fingertip_qemu::generated::ApproachTick;
     use fingertip_qemu::replay::{Position, SegmentLine, SegmentReport, replay};
     use fingertip_qemu::trace::Trace;
-    use fingertip_qemu::{CONFIG_POSTCARD, CONFIG_SOURCE, TRACE, TRACE_SOURCE};
+    use fingertip_qemu::{CONFIG_SOURCE, IMAGE, TRACE, TRACE_SOURCE};
 
     /// One whole tick as the firmware runs it: the tick generated for the configuration.
     /// A root of the forbidden-helper check.
     #[unsafe(no_mangle)]
     #[inline(never)]
     pub fn fingertip_tick(
-        detector: &Detector,
+        _detector: &Detector,
         state: &mut State,
         now: Tick,
         inputs: &Inputs,
         out: &mut Output,
     ) {
-        generated::tick(detector, state, now, inputs, out);
+        ApproachTick.tick_into(state, now, inputs, out);
     }
 
     /// One whole tick through the interpreter, `Detector::tick_into`, for comparison. A
@@ -65,40 +65,35 @@ mod target {
         inputs: &Inputs,
         out: &mut Output,
     ) {
-        detector.tick_into(state, now, inputs, out);
+        DetectorTick::tick_into(detector, state, now, inputs, out);
     }
 
     /// Stage 1 alone: samples in, features updated.
     #[unsafe(no_mangle)]
     #[inline(never)]
-    pub fn fingertip_update_features(detector: &Detector, state: &mut State, inputs: &Inputs) {
-        generated::update_features(detector, state, inputs);
+    pub fn fingertip_update_features(state: &mut State, inputs: &Inputs) {
+        ApproachTick.update_features(state, inputs);
     }
 
     /// Stage 2 alone: every term's confidence distribution function.
     #[unsafe(no_mangle)]
     #[inline(never)]
-    pub fn fingertip_term_confidences(
-        detector: &Detector,
-        state: &mut State,
-        faults: ChannelMask,
-        out: &mut Output,
-    ) {
-        generated::term_confidences(detector, state, faults, out);
+    pub fn fingertip_term_confidences(state: &mut State, faults: ChannelMask, out: &mut Output) {
+        ApproachTick.term_confidences(state, faults, out);
     }
 
     /// Stage 3 alone: eq. 14 per event.
     #[unsafe(no_mangle)]
     #[inline(never)]
-    pub fn fingertip_combine(detector: &Detector, state: &State, out: &mut Output) {
-        generated::combine(detector, state, out);
+    pub fn fingertip_combine(state: &State, out: &mut Output) {
+        ApproachTick.combine(state, out);
     }
 
     /// Stage 4 alone: decision levels and onsets.
     #[unsafe(no_mangle)]
     #[inline(never)]
-    pub fn fingertip_decide(detector: &Detector, state: &mut State, now: Tick, out: &mut Output) {
-        generated::decide(detector, state, now, out);
+    pub fn fingertip_decide(state: &mut State, now: Tick, out: &mut Output) {
+        ApproachTick.decide(state, now, out);
     }
 
     /// Calibration: exactly `N` instructions between call and return, besides the call
@@ -285,12 +280,12 @@ mod target {
             Ok(t) => t,
             Err(e) => fail(&e),
         };
-        let mut config_crc = Crc32::new();
-        config_crc.update(CONFIG_POSTCARD);
+        let mut image_crc = Crc32::new();
+        image_crc.update(IMAGE);
         hprintln!(
-            "fingertip-qemu config={} config_crc={:08x} trace={} segments={} ticks={} channels={} features={} events={} state_bytes={}",
+            "fingertip-qemu config={} image_crc={:08x} trace={} segments={} ticks={} channels={} features={} events={} state_bytes={}",
             CONFIG_SOURCE,
-            config_crc.value(),
+            image_crc.value(),
             TRACE_SOURCE,
             trace.segment_count(),
             trace.ticks(),
@@ -331,11 +326,10 @@ mod target {
             &trace,
             |state, now, inputs, at| {
                 let mut out = Output::default();
-                let ((), a) = timed(|| fingertip_update_features(&detector, state, inputs));
-                let ((), b) =
-                    timed(|| fingertip_term_confidences(&detector, state, inputs.faults, &mut out));
-                let ((), c) = timed(|| fingertip_combine(&detector, state, &mut out));
-                let ((), d) = timed(|| fingertip_decide(&detector, state, now, &mut out));
+                let ((), a) = timed(|| fingertip_update_features(state, inputs));
+                let ((), b) = timed(|| fingertip_term_confidences(state, inputs.faults, &mut out));
+                let ((), c) = timed(|| fingertip_combine(state, &mut out));
+                let ((), d) = timed(|| fingertip_decide(state, now, &mut out));
                 let parts = [a, b, c, d].map(|c| meter.insns(c));
                 for (s, v) in stages.iter_mut().zip(parts) {
                     s.add(v, at);

@@ -1,7 +1,9 @@
 //! The replay loop both sides run: decode each record, call a step function (the tick, or
 //! the four stages, timed or not), and digest the result.
 
-use detector_core::{Detector, Inputs, Level, MAX_EVENTS, Output, Signal, State, Tick};
+use detector_core::{
+    Detector, DetectorTick, Inputs, Level, MAX_EVENTS, Output, Signal, State, Tick,
+};
 
 use crate::digest::{Digest, Digester};
 use crate::trace::{Segment, Trace};
@@ -99,14 +101,19 @@ pub fn plain_tick(
     move |state, now, inputs, _| detector.tick(state, now, inputs)
 }
 
-/// One tick run stage by stage through the four public stages, exactly as
-/// [`Detector::tick`] composes them; a profiler times each call.
-pub fn staged_tick(detector: &Detector, state: &mut State, now: Tick, inputs: &Inputs) -> Output {
+/// One tick run stage by stage through the four stages of a [`DetectorTick`], exactly as
+/// [`DetectorTick::tick_into`] composes them; a profiler times each call.
+pub fn staged_tick(
+    tick: &impl DetectorTick,
+    state: &mut State,
+    now: Tick,
+    inputs: &Inputs,
+) -> Output {
     let mut out = Output::default();
-    detector.update_features(state, inputs);
-    detector.term_confidences(state, inputs.faults, &mut out);
-    detector.combine(state, &mut out);
-    detector.decide(state, now, &mut out);
+    tick.update_features(state, inputs);
+    tick.term_confidences(state, inputs.faults, &mut out);
+    tick.combine(state, &mut out);
+    tick.decide(state, now, &mut out);
     out
 }
 

@@ -1,0 +1,375 @@
+//! What a tick works on: its [`Inputs`] and [`Output`], a detector's [`State`], the
+//! decision types, and the steps of a tick one item at a time. The interpreter
+//! ([`Detector`](crate::Detector)) loops over its tables and calls the steps; a tick
+//! generated at build time calls them with constants (through `detector_core::__private`).
+//! Indices are masked to their array's power-of-two length: one instruction, no bounds
+//! check, no panic whatever they are.
+
+use heapless::Vec;
+
+use crate::cdf::Cdf;
+use crate::expr::Rust;
+use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState};
+use crate::image::{ImageError, Reader, Sink};
+use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
+use crate::{MAX_CHANNELS, MAX_DISTINCT_TERMS as MAX_PSI, MAX_EVENTS, MAX_FEATURES};
+
+// Reads of `State`'s arrays mask their index with the length - 1: one instruction, no bounds
+// check.
+const _: () = assert!(
+    MAX_PSI.is_power_of_two()
+        && MAX_PSI <= 256
+        && MAX_CHANNELS.is_power_of_two()
+        && MAX_FEATURES.is_power_of_two()
+        && MAX_EVENTS.is_power_of_two()
+);
+
+/// The index of an event in its configuration, `0..MAX_EVENTS`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct EventId(pub u8);
+
+/// A phase of a particular detector; only obtainable from it, so always valid for it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct PhaseId(pub(crate) u8);
+
+impl PhaseId {
+    /// The phase's index in the configuration.
+    pub const fn index(self) -> u8 {
+        self.0
+    }
+}
+
+/// A decision level.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Level {
+    /// Early warning: the event may be happening.
+    Alert,
+    /// Confirmation: the controller may act on it.
+    Confirm,
+}
+
+impl Level {
+    /// The level's name as the tools and the CAN stream write it.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Level::Alert => "alert",
+            Level::Confirm => "confirm",
+        }
+    }
+}
+
+/// A level raised for an event.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Decision {
+    /// Which event.
+    pub event: EventId,
+    /// Which level was raised.
+    pub level: Level,
+    /// The event's confidence at that tick.
+    pub confidence: Confidence,
+    /// Back-dated onset: the first tick of the current run of confidence above the
+    /// event's `onset_level` (by default, when the confidence last left zero).
+    pub onset: Tick,
+    /// The tick at which the level was raised.
+    pub tick: Tick,
+}
+
+/// One tick's inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Inputs {
+    /// Channel samples in each channel's working unit (SI × its scale, see
+    /// [`Detector::sample_from_si`](crate::Detector::sample_from_si)), in the configuration's channel order; entries past
+    /// the channel count are ignored.
+    pub samples: [Signal; MAX_CHANNELS],
+    /// Channels currently known bad (sensor fault, stale context): bit `i` for channel `i`.
+    pub faults: ChannelMask,
+}
+
+impl Default for Inputs {
+    fn default() -> Self {
+        Inputs {
+            samples: [Signal::ZERO; MAX_CHANNELS],
+            faults: 0,
+        }
+    }
+}
+
+/// One tick's results.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Output {
+    /// Each event's confidence, by [`EventId`]; zero for events not evaluated.
+    pub confidences: [Confidence; MAX_EVENTS],
+    /// The events of the active phase (the ones evaluated).
+    pub evaluated: EventMask,
+    /// Events of the phase that cannot be judged because a context feature, or every
+    /// sensor feature, reads a faulty channel: confidence 0, no decision.
+    pub unjudgeable: EventMask,
+    /// Events judged without some sensor terms, whose features read a faulty channel
+    /// (those terms count as 0, so the confidence can only be lower).
+    pub degraded: EventMask,
+    /// Events whose alert level is up after this tick.
+    pub alerting: EventMask,
+    /// Events whose confirm level is up after this tick.
+    pub confirmed: EventMask,
+    /// Levels raised at this tick, at most two per event.
+    pub decisions: Vec<Decision, { 2 * MAX_EVENTS }>,
+}
+
+impl Output {
+    /// Clears every field for a new tick (no allocation, no copy of a whole `Output`).
+    #[inline(always)]
+    pub fn clear(&mut self) {
+        self.confidences = [Confidence::ZERO; MAX_EVENTS];
+        self.evaluated = 0;
+        self.unjudgeable = 0;
+        self.degraded = 0;
+        self.alerting = 0;
+        self.confirmed = 0;
+        self.decisions.clear();
+    }
+}
+
+/// A decision level: up at `on` (Q15) after `dwell` ticks in a row, down below `off`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LevelParams {
+    pub(crate) on: u16,
+    pub(crate) off: u16,
+    pub(crate) dwell: u16,
+}
+
+impl LevelParams {
+    /// A level raised once the confidence has stayed at or above `on` (Q15, in (0, 1]) for
+    /// `dwell` ticks in a row (at least 1) and lowered when it falls below `off` (at most
+    /// `on`); `None` outside those ranges.
+    pub const fn new(on: u16, off: u16, dwell: u16) -> Option<LevelParams> {
+        if on == 0 || on > Confidence::ONE.to_bits() || off > on || dwell == 0 {
+            None
+        } else {
+            Some(LevelParams { on, off, dwell })
+        }
+    }
+
+    /// [`LevelParams::new`] for generated code's constants: values it refuses fail the
+    /// build of the generated code.
+    #[doc(hidden)]
+    pub const fn checked(on: u16, off: u16, dwell: u16) -> LevelParams {
+        match LevelParams::new(on, off, dwell) {
+            Some(l) => l,
+            None => panic!("decision level"),
+        }
+    }
+
+    /// The confidence (Q15) at or above which the level counts ticks.
+    pub const fn on(&self) -> u16 {
+        self.on
+    }
+
+    /// The confidence (Q15) below which a raised level falls.
+    pub const fn off(&self) -> u16 {
+        self.off
+    }
+
+    /// Ticks in a row at or above `on` before the level is raised.
+    pub const fn dwell(&self) -> u16 {
+        self.dwell
+    }
+
+    /// This level as a Rust expression for generated code.
+    pub fn rust(&self) -> Rust<'_, LevelParams> {
+        Rust(self)
+    }
+
+    pub(crate) fn read_image(r: &mut Reader<'_>) -> Result<LevelParams, ImageError> {
+        let (on, off, dwell) = (r.u16()?, r.u16()?, r.u16()?);
+        LevelParams::new(on, off, dwell).ok_or(ImageError::Invalid("decision level"))
+    }
+
+    /// Appends this level to a detector image.
+    pub fn write_image(&self, w: &mut impl Sink) {
+        w.u16(self.on);
+        w.u16(self.off);
+        w.u16(self.dwell);
+    }
+}
+
+impl core::fmt::Display for Rust<'_, LevelParams> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let l = self.0;
+        write!(f, "LevelParams::checked({}, {}, {})", l.on, l.off, l.dwell)
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct LevelState {
+    pub(crate) up: bool,
+    run: u16,
+}
+
+impl LevelState {
+    /// One tick of a level at confidence `q` (Q15): up at `on` after `dwell` ticks in a
+    /// row, down below `off`. Returns whether the level was raised at this tick.
+    #[inline(always)]
+    pub(crate) fn step(&mut self, p: &LevelParams, q: u16) -> bool {
+        if self.up {
+            if q < p.off {
+                *self = LevelState::default();
+            }
+            false
+        } else if q >= p.on {
+            self.run = self.run.saturating_add(1);
+            self.up = self.run >= p.dwell;
+            self.up
+        } else {
+            self.run = 0;
+            false
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct EventState {
+    pub(crate) rising: bool,
+    pub(crate) onset: Tick,
+    pub(crate) levels: [LevelState; 2],
+}
+
+/// Everything a detector changes as it runs. Fixed size, no allocation; see
+/// [`State::SIZE`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct State {
+    /// Channel samples then feature values, raw 16.16.
+    pub(crate) values: [i32; MAX_SLOTS],
+    pub(crate) stages: [StageState; MAX_FEATURES],
+    pub(crate) ring: [u64; STE_POOL],
+    /// Each ψ's confidence at the last tick (Q15), by the detector's ψ index.
+    pub(crate) psi: [u16; MAX_PSI],
+    pub(crate) events: [EventState; MAX_EVENTS],
+    pub(crate) phase: u8,
+}
+
+impl State {
+    /// The size of a detector's state in bytes.
+    pub const SIZE: usize = core::mem::size_of::<State>();
+
+    /// The current value of feature `index` (in configuration order).
+    pub fn feature(&self, index: usize) -> Option<Signal> {
+        let slot = MAX_CHANNELS
+            .checked_add(index)
+            .filter(|_| index < MAX_FEATURES)?;
+        self.values.get(slot).map(|&v| Signal::from_bits(v))
+    }
+
+    /// The active phase.
+    pub fn phase(&self) -> PhaseId {
+        PhaseId(self.phase)
+    }
+}
+
+/// A context product's starting value, 1 in Q15.
+pub const ONE: u32 = 1 << 15;
+
+/// One step of an event's context product: `acc · q` in Q15, rounded to nearest. Both are at
+/// most 2¹⁵, so the result is too.
+#[inline(always)]
+pub const fn product(acc: u32, q: u32) -> u32 {
+    (acc * q + (1 << 14)) >> 15
+}
+
+/// Eq. 14 from an event's context `product` (Q15) and the sum of its sensor terms'
+/// weight (Q15) × ψ (Q15): product × min(1, Σ w ψ), rounded to nearest. Weights sum to at
+/// most 2¹⁵ + 2, so the sum stays below 2³¹.
+#[inline(always)]
+pub const fn eq14(product: u32, weighted_sum: u32) -> Confidence {
+    let sum = (weighted_sum + (1 << 14)) >> 15;
+    let sum = if sum > 1 << 15 { 1 << 15 } else { sum };
+    Confidence::from_bits_clamped((product * sum + (1 << 14)) >> 15)
+}
+
+/// Stores channel `c`'s sample from `inputs` in its slot.
+#[inline(always)]
+pub fn load_sample(state: &mut State, c: usize, inputs: &Inputs) {
+    let c = c & (MAX_CHANNELS - 1);
+    state.values[c] = inputs.samples[c].to_bits();
+}
+
+/// Updates feature `k`, computed by `stage`; `taps` are the detector's STE window taps.
+#[inline(always)]
+pub fn step_feature(state: &mut State, k: usize, stage: &Stage, taps: &[u32]) {
+    let k = k & (MAX_FEATURES - 1);
+    let y = stage.update(&mut state.stages[k], &state.values, &mut state.ring, taps);
+    state.values[(MAX_CHANNELS + k) & (MAX_SLOTS - 1)] = y;
+}
+
+/// Evaluates ψ `k`: `cdf` of the value in `slot`. Returns its confidence (Q15).
+#[inline(always)]
+pub fn eval_psi(state: &mut State, k: usize, slot: u8, cdf: &Cdf) -> u32 {
+    let x = state.values[usize::from(slot) & (MAX_SLOTS - 1)];
+    let q = cdf.eval(Signal::from_bits(x)).to_bits();
+    state.psi[k & (MAX_PSI - 1)] = q;
+    u32::from(q)
+}
+
+/// ψ `k`'s confidence at the last tick (Q15).
+#[inline(always)]
+pub fn psi_value(state: &State, k: usize) -> u32 {
+    u32::from(state.psi[k & (MAX_PSI - 1)])
+}
+
+/// Lowers every level of event `i` and forgets its onset (it cannot be judged).
+#[inline(always)]
+pub fn reset_event(state: &mut State, i: usize) {
+    state.events[i & (MAX_EVENTS - 1)] = EventState::default();
+}
+
+/// Sets ψ `k` to 0 (its feature reads a faulty channel).
+#[inline(always)]
+pub fn clear_psi(state: &mut State, k: usize) {
+    state.psi[k & (MAX_PSI - 1)] = 0;
+}
+
+/// Decision levels and onset of event `i` at confidence `c`: tracks the onset, steps the
+/// alert and confirm levels, and reports them in `out`.
+#[inline(always)]
+pub fn decide_event(
+    state: &mut State,
+    i: usize,
+    levels: &[LevelParams; 2],
+    onset_level: u16,
+    c: Confidence,
+    now: Tick,
+    out: &mut Output,
+) {
+    let i = i & (MAX_EVENTS - 1);
+    let st = &mut state.events[i];
+    let bit: EventMask = 1 << i;
+    let q = c.to_bits();
+    if q <= onset_level {
+        st.rising = false;
+    } else if !st.rising {
+        st.rising = true;
+        st.onset = now;
+    }
+    let [alert, confirm] = &mut st.levels;
+    let raised_alert = alert.step(&levels[0], q);
+    let raised_confirm = confirm.step(&levels[1], q);
+    out.alerting |= bit * EventMask::from(alert.up);
+    out.confirmed |= bit * EventMask::from(confirm.up);
+    let decision = |level| Decision {
+        event: EventId(i as u8),
+        level,
+        confidence: c,
+        onset: st.onset,
+        tick: now,
+    };
+    // Capacity is two per event, so neither push can fail.
+    if raised_alert {
+        let _ = out.decisions.push(decision(Level::Alert));
+    }
+    if raised_confirm {
+        let _ = out.decisions.push(decision(Level::Confirm));
+    }
+}

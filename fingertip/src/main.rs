@@ -1,0 +1,997 @@
+//! `fingertip`: design and prove a fingertip event detector on the PC.
+//!
+//! Simulate the paper's Table 1 runs, replay any trace through the same fixed-point core
+//! that runs on the chip, evaluate many randomized runs, and plot confidences over time.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{Context as _, Result, anyhow, bail};
+use clap::{Parser, Subcommand};
+use detector_build::Config;
+use detector_core::Detector;
+use fingertip::can_tools::busload::{self, BusConfig};
+use fingertip::can_tools::candump::write_log_line;
+use fingertip::can_tools::decode::{self, DecodeOptions};
+use fingertip::plot::{self, RunPlot};
+use fingertip::replay::{self, DecisionRecord};
+use fingertip::score::{self, Outcome, ScenarioReport};
+use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::trace::Trace;
+use fingertip_can::{NodeId, Status, Transmitter, TxState};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+#[derive(Parser)]
+#[command(
+    name = "fingertip",
+    version,
+    about = "Design and prove a fingertip event detector on the PC"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Simulate a scenario and write its trace (CSV; see docs/trace-format.md).
+    Simulate {
+        /// Scenario name; `fingertip scenarios` lists them.
+        scenario: String,
+        /// Seed of the noise (and of the parameters, with --randomize).
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Draw speeds, stiffness, masses, onset, noise and gains from their ranges instead
+        /// of the nominal Table 1 values.
+        #[arg(long)]
+        randomize: bool,
+        /// Length of the run in seconds (default: onset + 130 ms for Table 1 runs, 10 s for
+        /// free motion).
+        #[arg(long)]
+        duration: Option<f64>,
+        /// Output file; standard output when absent.
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// List the scenarios and the event each should raise.
+    Scenarios,
+    /// Run the detector over a trace: confirmations with their latency, per-tick confidences,
+    /// a plot.
+    Replay {
+        /// The trace (CSV).
+        trace: PathBuf,
+        /// Detector configuration (TOML); the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Write per-tick confidences here (CSV).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Write a plot here (.png or .svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Print one JSON object to standard output instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Also write the CAN frames the firmware would have sent, timestamped, in candump
+        /// log format (`(sec.usec) can0 ID#HEX`).
+        #[arg(long)]
+        candump: Option<PathBuf>,
+        /// The fingertip's CAN node id (0..=15) for --candump.
+        #[arg(long, default_value_t = 0)]
+        node: u8,
+    },
+    /// Decode a candump log (log or screen format): confidences, events, status, and every
+    /// malformed line, bad CRC and counter gap by line number.
+    Decode {
+        /// The log file.
+        file: PathBuf,
+        /// Configuration whose event names to show; the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Only this node's frames (0..=15).
+        #[arg(long)]
+        node: Option<u8>,
+        /// Print events, status and problems only, not every confidence page.
+        #[arg(long)]
+        quiet: bool,
+        /// Plot the confidence stream and events here (.png or .svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+    },
+    /// Decode live SocketCAN traffic (Linux) the way `decode` reads a log.
+    Monitor {
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long)]
+        iface: String,
+        /// Configuration whose event names to show; the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Only this node's frames (0..=15).
+        #[arg(long)]
+        node: Option<u8>,
+        /// Print events, status and problems only.
+        #[arg(long)]
+        quiet: bool,
+        /// Stop after this many frames.
+        #[arg(long)]
+        frames: Option<usize>,
+        /// Stop after this many seconds.
+        #[arg(long)]
+        seconds: Option<f64>,
+        /// Also log the fingertips' frames here in candump log format.
+        #[arg(long)]
+        candump: Option<PathBuf>,
+    },
+    /// Worst-case CAN bus load and event-frame latency for N fingertips.
+    Busload {
+        /// Fingertips on the bus (1..=16).
+        #[arg(long, default_value_t = 1)]
+        fingertips: u32,
+        /// Ticks per confidence-stream sample.
+        #[arg(long)]
+        decimation: Option<u32>,
+        /// Context frames per second to each fingertip.
+        #[arg(long)]
+        context_hz: Option<f64>,
+        /// Tip-state frames per second to each fingertip.
+        #[arg(long)]
+        tip_state_hz: Option<f64>,
+        /// Bit rate in bit/s.
+        #[arg(long)]
+        bitrate: Option<u32>,
+    },
+    /// Randomized runs of every scenario: detections, errors, latency, false alarms.
+    Evaluate {
+        /// Randomized runs per scenario.
+        #[arg(long, default_value_t = 1000)]
+        runs: usize,
+        /// Base seed; run k of a scenario uses a seed derived from it.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Detector configuration (TOML); the approach configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Hours of simulated event-free motion for the false-alarm rate.
+        #[arg(long, default_value_t = 1.0)]
+        free_hours: f64,
+        /// Also write the report as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
+    /// Simulate the four runs of the paper's figure 4 and a sudden acceleration, print who
+    /// was detected when, and write the figures.
+    Demo {
+        /// Where to write the figures.
+        #[arg(long, default_value = "out/demo")]
+        out: PathBuf,
+    },
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(error) => {
+            eprintln!("error: {}", one_line(&error));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The error and its causes on one line, outermost first, each joined by `: `. A cause
+/// whose text is already shown is skipped: many errors print their source in their own
+/// message, and a file name or reason is said once.
+fn one_line(error: &anyhow::Error) -> String {
+    let mut line = String::new();
+    for cause in error.chain() {
+        let text = cause.to_string();
+        if line.contains(&text) {
+            continue;
+        }
+        if !line.is_empty() {
+            line.push_str(": ");
+        }
+        line.push_str(&text);
+    }
+    line
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Simulate {
+            scenario,
+            seed,
+            randomize,
+            duration,
+            out,
+        } => simulate(&scenario, seed, randomize, duration, out.as_deref()),
+        Command::Scenarios => {
+            for s in Scenario::all() {
+                println!("{:<26} {}", s.name(), s.expected().unwrap_or("none"));
+            }
+            Ok(())
+        }
+        Command::Replay {
+            trace,
+            config,
+            out,
+            plot,
+            json,
+            candump,
+            node,
+        } => {
+            let can = match candump {
+                Some(path) => Some((path, node_id(node)?)),
+                None => None,
+            };
+            replay_cmd(
+                &trace,
+                config.as_deref(),
+                out.as_deref(),
+                plot.as_deref(),
+                json,
+                can,
+            )
+        }
+        Command::Decode {
+            file,
+            config,
+            node,
+            quiet,
+            plot,
+        } => decode_cmd(&file, config.as_deref(), node, quiet, plot.as_deref()),
+        Command::Monitor {
+            iface,
+            config,
+            node,
+            quiet,
+            frames,
+            seconds,
+            candump,
+        } => monitor_cmd(
+            &iface,
+            config.as_deref(),
+            node,
+            quiet,
+            frames,
+            seconds,
+            candump.as_deref(),
+        ),
+        Command::Busload {
+            fingertips,
+            decimation,
+            context_hz,
+            tip_state_hz,
+            bitrate,
+        } => {
+            let mut cfg = BusConfig::with_fingertips(fingertips);
+            if let Some(d) = decimation {
+                cfg.stream_decimation = d;
+            }
+            if let Some(h) = context_hz {
+                cfg.context_hz = h;
+            }
+            if let Some(h) = tip_state_hz {
+                cfg.tip_state_hz = h;
+            }
+            if let Some(b) = bitrate {
+                cfg.bitrate = b;
+            }
+            let report = busload::analyse(&cfg)?;
+            busload::write_report(&cfg, &report, &mut std::io::stdout().lock())?;
+            Ok(())
+        }
+        Command::Evaluate {
+            runs,
+            seed,
+            config,
+            free_hours,
+            json,
+        } => evaluate(runs, seed, config.as_deref(), free_hours, json.as_deref()),
+        Command::Demo { out } => demo(&out),
+    }
+}
+
+/// The detector from `--config`, or the approach configuration, and the configuration's
+/// name (its path). What is legal but probably unintended in it is printed as a warning.
+fn load_detector(path: Option<&Path>) -> Result<(Detector, String)> {
+    let (config, name) = match path {
+        Some(p) => (detector_build::load(p)?, p.display().to_string()),
+        None => {
+            let name = "configs/approach.toml";
+            let config = Config::from_toml(fingertip::APPROACH_TOML).context(name)?;
+            (config, name.to_string())
+        }
+    };
+    let compiled = detector_build::compile(&config).with_context(|| name.clone())?;
+    for w in &compiled.warnings {
+        eprintln!("warning: {name}: {w}");
+    }
+    let detector = compiled.detector().with_context(|| name.clone())?;
+    Ok((detector, name))
+}
+
+/// The CAN node id of `--node`.
+fn node_id(node: u8) -> Result<NodeId> {
+    NodeId::new(node).ok_or_else(|| anyhow!("--node {node} must be within 0..=15"))
+}
+
+fn simulate(
+    name: &str,
+    seed: u64,
+    randomize: bool,
+    duration_s: Option<f64>,
+    out: Option<&Path>,
+) -> Result<()> {
+    let scenario: Scenario = name.parse()?;
+    let trace = sim::simulate(
+        &scenario,
+        &SimOptions {
+            seed,
+            randomize,
+            duration_s,
+            ..SimOptions::default()
+        },
+    )?;
+    match out {
+        Some(path) => trace.write(path)?,
+        None => print!("{}", trace.to_csv()),
+    }
+    Ok(())
+}
+
+/// A replay with every tick's confidences kept, for plots and CSV output.
+struct Recorded {
+    decisions: Vec<DecisionRecord>,
+    /// Per event of the configuration: name and confidence per tick.
+    series: Series,
+    /// Per feature of the configuration: name and value per tick.
+    features: Series,
+}
+
+fn record(detector: &Detector, trace: &Trace) -> Result<Recorded> {
+    let names: Vec<String> = detector.events().iter().map(|n| n.to_string()).collect();
+    let feature_names: Vec<String> = detector.features().iter().map(|n| n.to_string()).collect();
+    let mut values = vec![Vec::with_capacity(trace.len()); names.len()];
+    let mut features = vec![Vec::with_capacity(trace.len()); feature_names.len()];
+    let decisions = replay::replay(detector, trace, |_, state, out| {
+        for (v, c) in values.iter_mut().zip(out.confidences.iter()) {
+            v.push(c.to_f64());
+        }
+        for (k, f) in features.iter_mut().enumerate() {
+            f.push(state.feature(k).map_or(f64::NAN, |x| x.to_f64()));
+        }
+    })?;
+    Ok(Recorded {
+        decisions,
+        series: names.into_iter().zip(values).collect(),
+        features: feature_names.into_iter().zip(features).collect(),
+    })
+}
+
+fn truth_of(trace: &Trace) -> Option<(String, f64)> {
+    trace
+        .truth_onset()
+        .and_then(|(row, event)| trace.time().get(row).map(|&t| (event.to_string(), t)))
+}
+
+/// Writes per-tick event confidences and feature values as CSV (atomically).
+fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -> Result<()> {
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "# fingertip replay of {} with {}",
+        trace.name(),
+        config
+    );
+    let _ = writeln!(
+        text,
+        "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit"
+    );
+    let header: Vec<String> = rec
+        .series
+        .iter()
+        .map(|(n, _)| n.clone())
+        .chain(rec.features.iter().map(|(n, _)| format!("feature:{n}")))
+        .collect();
+    let _ = writeln!(text, "t,{}", header.join(","));
+    for (k, t) in trace.time().iter().enumerate() {
+        let _ = write!(text, "{t:.6}");
+        for (_, v) in &rec.series {
+            let _ = write!(text, ",{:.5}", v.get(k).copied().unwrap_or(0.0));
+        }
+        for (_, v) in &rec.features {
+            let _ = write!(text, ",{:.6}", v.get(k).copied().unwrap_or(0.0));
+        }
+        text.push('\n');
+    }
+    write_atomically(path, text.as_bytes())
+}
+
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    fingertip::trace::write_atomically(path, bytes).with_context(|| path.display().to_string())
+}
+
+fn describe(d: &DecisionRecord, truth: Option<&(String, f64)>) -> String {
+    let mut s = format!(
+        "{:>9.2} ms  {:<15} {:<8} confidence {:.3}  onset {:.2} ms",
+        d.t_s * 1e3,
+        d.event,
+        d.level,
+        d.confidence,
+        d.onset_s * 1e3
+    );
+    if let Some((event, onset)) = truth {
+        let _ = write!(
+            s,
+            "  ({:+.2} ms after the true {event} onset)",
+            (d.t_s - onset) * 1e3
+        );
+    }
+    s
+}
+
+fn replay_cmd(
+    path: &Path,
+    config: Option<&Path>,
+    out: Option<&Path>,
+    plot_to: Option<&Path>,
+    json: bool,
+    candump: Option<(PathBuf, NodeId)>,
+) -> Result<()> {
+    let (detector, config_name) = load_detector(config)?;
+    let trace = Trace::read(path)?;
+    let rec = record(&detector, &trace)?;
+    if let Some((file, node)) = candump {
+        write_candump(&file, &detector, &trace, node)?;
+    }
+    let truth = truth_of(&trace);
+    if let Some(out) = out {
+        write_confidences(out, &trace, &rec, &config_name)?;
+    }
+    if let Some(p) = plot_to {
+        let run = RunPlot {
+            title: trace.name().to_string(),
+            t: trace.time(),
+            series: rec.series.clone(),
+            truth: truth.clone(),
+            decisions: &rec.decisions,
+        };
+        plot::write_run(p, &run)?;
+    }
+    if json {
+        let report = serde_json::json!({
+            "trace": trace.name(),
+            "config": config_name,
+            "truth": truth.as_ref().map(|(e, t)| serde_json::json!({"event": e, "onset_s": t})),
+            "events": rec.decisions,
+        });
+        println!("{report}");
+        return Ok(());
+    }
+    println!(
+        "{} with {}: {} ticks at {} Hz",
+        trace.name(),
+        config_name,
+        trace.len(),
+        detector.rate_hz()
+    );
+    if let Some((event, onset)) = &truth {
+        println!("true event: {event} at {:.2} ms", onset * 1e3);
+    }
+    if rec.decisions.is_empty() {
+        println!("no level raised");
+    }
+    for d in &rec.decisions {
+        println!("{}", describe(d, truth.as_ref()));
+    }
+    Ok(())
+}
+
+/// Replays `trace` through the firmware's transmit logic and writes every frame it would
+/// send in candump log format, stamped with the trace's time.
+fn write_candump(path: &Path, detector: &Detector, trace: &Trace, node: NodeId) -> Result<()> {
+    let tx = Transmitter::with_defaults(node, detector.rate_hz().round() as u32)?;
+    let mut state = TxState::new();
+    let status = Status {
+        tick_rate_hz: detector.rate_hz().round() as u16,
+        ..Status::default()
+    };
+    let mut text: Vec<u8> = Vec::new();
+    let t = trace.time();
+    let mut io_result = Ok(());
+    replay::replay(detector, trace, |row, _, out| {
+        let stamp = std::time::Duration::from_secs_f64(t.get(row).copied().unwrap_or(0.0).max(0.0));
+        for frame in tx.tick(&mut state, row as u32, out, &status) {
+            if io_result.is_ok() {
+                io_result = write_log_line(&mut text, stamp, "can0", &frame);
+            }
+        }
+    })?;
+    io_result.with_context(|| path.display().to_string())?;
+    write_atomically(path, &text)
+}
+
+fn decode_options(config: Option<&Path>, node: Option<u8>, quiet: bool) -> Result<DecodeOptions> {
+    let (detector, _) = load_detector(config)?;
+    let node = node.map(node_id).transpose()?;
+    Ok(DecodeOptions {
+        tick_rate_hz: f64::from(detector.rate_hz()),
+        event_names: detector.events().iter().map(|n| n.to_string()).collect(),
+        node,
+        print_confidences: !quiet,
+    })
+}
+
+fn decode_cmd(
+    file: &Path,
+    config: Option<&Path>,
+    node: Option<u8>,
+    quiet: bool,
+    plot_to: Option<&Path>,
+) -> Result<()> {
+    let opts = decode_options(config, node, quiet)?;
+    let log = decode::decode_file(file, &opts, &mut std::io::stdout().lock())?;
+    if let Some(p) = plot_to {
+        let (t, series, decisions) = stream_series(&log, &opts);
+        let run = RunPlot {
+            title: file.display().to_string(),
+            t: &t,
+            series,
+            truth: None,
+            decisions: &decisions,
+        };
+        plot::write_run(p, &run)?;
+    }
+    Ok(())
+}
+
+/// Named series of values, one per tick or stream sample.
+type Series = Vec<(String, Vec<f64>)>;
+
+/// The confidence stream of a decoded log as per-event series on the stream's own time
+/// base (each event holds its last value between pages), and its event frames.
+fn stream_series(
+    log: &decode::DecodedLog,
+    opts: &DecodeOptions,
+) -> (Vec<f64>, Series, Vec<DecisionRecord>) {
+    use fingertip_can::Message;
+    let mut t = Vec::new();
+    let mut current: Vec<f64> = Vec::new();
+    let mut series: Series = Vec::new();
+    for r in log.records() {
+        let (Message::Confidence(m), Some(time)) = (&r.message, r.time) else {
+            continue;
+        };
+        for (k, c) in m.confidences.iter().enumerate() {
+            if m.evaluated & (1 << k) == 0 {
+                continue;
+            }
+            let index = 3 * usize::from(m.page) + k;
+            if current.len() <= index {
+                current.resize(index + 1, 0.0);
+            }
+            current[index] = c.to_f64();
+        }
+        t.push(time);
+        for (index, value) in current.iter().enumerate() {
+            if series.len() <= index {
+                let filled = vec![0.0; t.len() - 1];
+                series.push((opts.event_name(index), filled));
+            }
+            series[index].1.push(*value);
+        }
+    }
+    let t0 = t.first().copied().unwrap_or(0.0);
+    let t: Vec<f64> = t.iter().map(|x| x - t0).collect();
+    let decisions = log
+        .events()
+        .filter_map(|(r, m)| {
+            let time = r.time? - t0;
+            Some(DecisionRecord {
+                event: opts.event_name(usize::from(m.event.0)),
+                level: m.level.name(),
+                confidence: m.confidence.to_f64(),
+                onset_s: time - f64::from(m.onset_age) / opts.tick_rate_hz,
+                t_s: time,
+            })
+        })
+        .collect();
+    (t, series, decisions)
+}
+
+fn monitor_cmd(
+    iface: &str,
+    config: Option<&Path>,
+    node: Option<u8>,
+    quiet: bool,
+    frames: Option<usize>,
+    seconds: Option<f64>,
+    candump: Option<&Path>,
+) -> Result<()> {
+    use fingertip::can_tools::monitor::{self, MonitorLimits};
+    let opts = decode_options(config, node, quiet)?;
+    let duration = match seconds {
+        Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+        Some(s) => bail!("--seconds {s} must be a positive number"),
+        None => None,
+    };
+    let limits = MonitorLimits {
+        max_frames: frames,
+        duration,
+    };
+    let mut log_file = match candump {
+        Some(p) => Some(std::io::BufWriter::new(
+            std::fs::File::create(p).with_context(|| p.display().to_string())?,
+        )),
+        None => None,
+    };
+    let copy = log_file.as_mut().map(|w| w as &mut dyn std::io::Write);
+    let log = monitor::monitor(
+        iface,
+        &opts,
+        &limits,
+        &mut std::io::stdout().lock(),
+        copy,
+        &|| false,
+    )?;
+    decode::write_summary(&log, &mut std::io::stdout().lock())?;
+    Ok(())
+}
+
+/// Failing runs listed per scenario by `evaluate`.
+const SHOWN_FAILURES: usize = 3;
+
+/// Length of each simulated stretch of event-free motion (s).
+const FREE_RUN_S: f64 = 60.0;
+
+/// The most randomized runs per scenario `evaluate` takes: 1.4 million runs in all, a day
+/// of work on two cores, and its bookkeeping stays within tens of megabytes.
+const MAX_RUNS: usize = 100_000;
+
+/// The most hours of event-free motion `evaluate` simulates: about a day of work on two
+/// cores.
+const MAX_FREE_HOURS: f64 = 100.0;
+
+/// One randomized run of `evaluate`.
+#[derive(Clone, Copy, Debug)]
+enum Job {
+    /// Run `k` of the Table 1 scenario at `index` in [`Scenario::table1`].
+    Table1 { index: usize, k: usize },
+    /// Stretch `k` of event-free motion, [`FREE_RUN_S`] long.
+    FreeMotion { k: usize },
+}
+
+impl Job {
+    /// Every job: `runs` of each Table 1 scenario in order, then `free_runs` stretches of
+    /// free motion.
+    fn all(runs: usize, free_runs: usize) -> Vec<Job> {
+        (0..Scenario::table1().len())
+            .flat_map(|index| (0..runs).map(move |k| Job::Table1 { index, k }))
+            .chain((0..free_runs).map(|k| Job::FreeMotion { k }))
+            .collect()
+    }
+
+    fn scenario(self) -> Scenario {
+        match self {
+            Job::Table1 { index, .. } => Scenario::table1()[index],
+            Job::FreeMotion { .. } => Scenario::FreeMotion,
+        }
+    }
+
+    /// The run's length: the scenario's default for Table 1 runs.
+    fn duration_s(self) -> Option<f64> {
+        match self {
+            Job::Table1 { .. } => None,
+            Job::FreeMotion { .. } => Some(FREE_RUN_S),
+        }
+    }
+
+    /// The run's seed, derived from the base seed and spread so that no two runs share
+    /// one; free motion draws from stream `u64::MAX`, beyond every scenario index.
+    fn seed(self, base: u64) -> u64 {
+        let (stream, k) = match self {
+            Job::Table1 { index, k } => (index as u64, k),
+            Job::FreeMotion { k } => (u64::MAX, k),
+        };
+        base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (stream << 40) ^ k as u64
+    }
+}
+
+/// What one job gave.
+struct JobResult {
+    job: Job,
+    seed: u64,
+    outcome: Outcome,
+    /// Simulated time (s).
+    seconds: f64,
+}
+
+/// Simulates and scores one job.
+fn run_job(detector: &Detector, job: Job, base_seed: u64) -> Result<JobResult> {
+    let scenario = job.scenario();
+    let seed = job.seed(base_seed);
+    let opts = SimOptions {
+        seed,
+        randomize: true,
+        duration_s: job.duration_s(),
+        ..SimOptions::default()
+    };
+    let trace = sim::simulate(&scenario, &opts)?;
+    let decisions = replay::replay(detector, &trace, |_, _, _| {})?;
+    let truth = truth_of(&trace);
+    let expected = scenario
+        .expected()
+        .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+    Ok(JobResult {
+        job,
+        seed,
+        outcome: score::classify(expected, &decisions),
+        seconds: trace.len() as f64 / trace.rate_hz(),
+    })
+}
+
+/// Runs every job on all cores behind a progress bar; the results in job order and the
+/// wall time taken (s).
+fn run_jobs(detector: &Detector, jobs: &[Job], base_seed: u64) -> Result<(Vec<JobResult>, f64)> {
+    let bar = ProgressBar::new(jobs.len() as u64).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")?
+            .progress_chars("=> "),
+    );
+    let started = Instant::now();
+    let results: Result<Vec<JobResult>> = jobs
+        .par_iter()
+        .map(|&job| {
+            let result = run_job(detector, job, base_seed);
+            bar.inc(1);
+            result
+        })
+        .collect();
+    bar.finish_and_clear();
+    Ok((results?, started.elapsed().as_secs_f64()))
+}
+
+/// The results of `evaluate`, tallied.
+struct Tally {
+    /// One per Table 1 scenario.
+    reports: Vec<ScenarioReport>,
+    /// Free-motion runs with a confirmation.
+    free_alarms: usize,
+    /// Hours of free motion simulated.
+    free_hours: f64,
+    /// Simulated time of all runs (s).
+    simulated_s: f64,
+    /// Every run that went wrong, in job order: scenario, seed, outcome.
+    failures: Vec<(Scenario, u64, Outcome)>,
+}
+
+impl Tally {
+    fn of(results: Vec<JobResult>) -> Tally {
+        let scenarios = Scenario::table1();
+        let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
+        let mut free_alarms = 0usize;
+        let mut free_seconds = 0.0;
+        let mut simulated_s = 0.0;
+        let mut failures = Vec::new();
+        for r in results {
+            simulated_s += r.seconds;
+            if !r.outcome.is_right() {
+                failures.push((r.job.scenario(), r.seed, r.outcome.clone()));
+            }
+            match r.job {
+                Job::Table1 { index, .. } => outcomes[index].push(r.outcome),
+                Job::FreeMotion { .. } => {
+                    free_seconds += r.seconds;
+                    free_alarms += usize::from(!r.outcome.is_right());
+                }
+            }
+        }
+        Tally {
+            reports: scenarios
+                .iter()
+                .zip(&outcomes)
+                .map(|(s, o)| ScenarioReport::tally(s.name(), s.expected(), o))
+                .collect(),
+            free_alarms,
+            free_hours: free_seconds / 3600.0,
+            simulated_s,
+            failures,
+        }
+    }
+
+    fn alarms_per_hour(&self) -> f64 {
+        if self.free_hours > 0.0 {
+            self.free_alarms as f64 / self.free_hours
+        } else {
+            0.0
+        }
+    }
+
+    /// The table per scenario, the false-alarm rate and the first failures of each
+    /// scenario with the command that reproduces them.
+    fn print(&self) {
+        println!(
+            "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
+            "scenario",
+            "expected",
+            "runs",
+            "right",
+            "wrong",
+            "missed",
+            "med ms",
+            "p95 ms",
+            "p99 ms",
+            "max ms"
+        );
+        for r in &self.reports {
+            println!(
+                "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
+                r.name,
+                r.expected,
+                r.runs,
+                r.correct,
+                r.wrong,
+                r.missed,
+                r.latency_ms.median,
+                r.latency_ms.p95,
+                r.latency_ms.p99,
+                r.latency_ms.max
+            );
+        }
+        println!(
+            "false alarms: {} runs with a confirmation in {:.2} h of event-free motion = {:.2} per hour",
+            self.free_alarms,
+            self.free_hours,
+            self.alarms_per_hour()
+        );
+        if self.failures.is_empty() {
+            return;
+        }
+        println!(
+            "runs that went wrong (at most {SHOWN_FAILURES} per scenario; `fingertip simulate NAME --randomize --seed SEED` reproduces one):"
+        );
+        let mut shown: std::collections::HashMap<Scenario, usize> = Default::default();
+        for (scenario, seed, outcome) in &self.failures {
+            let n = shown.entry(*scenario).or_default();
+            *n += 1;
+            if *n > SHOWN_FAILURES {
+                continue;
+            }
+            let what = match outcome {
+                Outcome::Wrong { event, t_s } => {
+                    format!("{event} confirmed at {:.2} ms", t_s * 1e3)
+                }
+                _ => "missed".to_string(),
+            };
+            let duration = if *scenario == Scenario::FreeMotion {
+                format!(" --duration {FREE_RUN_S}")
+            } else {
+                String::new()
+            };
+            println!("  {:<26} --seed {seed}{duration}: {what}", scenario.name());
+        }
+    }
+}
+
+fn evaluate(
+    runs: usize,
+    seed: u64,
+    config: Option<&Path>,
+    free_hours: f64,
+    json: Option<&Path>,
+) -> Result<()> {
+    let (detector, config_name) = load_detector(config)?;
+    if !(1..=MAX_RUNS).contains(&runs) {
+        bail!("--runs = {runs} must be within 1..={MAX_RUNS} runs per scenario");
+    }
+    if !(free_hours.is_finite() && (0.0..=MAX_FREE_HOURS).contains(&free_hours)) {
+        bail!(
+            "--free-hours = {} must be within 0..={MAX_FREE_HOURS} hours",
+            fingertip::readable(free_hours)
+        );
+    }
+    let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
+    let (results, wall) = run_jobs(&detector, &Job::all(runs, free_runs), seed)?;
+    let tally = Tally::of(results);
+    let speed = tally.simulated_s / wall.max(1e-9);
+
+    println!("{config_name}: {runs} randomized runs per scenario, base seed {seed}");
+    tally.print();
+    println!(
+        "throughput: {:.0} simulated s in {wall:.1} wall s = {speed:.0} simulated s per wall s ({} threads)",
+        tally.simulated_s,
+        rayon::current_num_threads()
+    );
+    if let Some(path) = json {
+        let report = serde_json::json!({
+            "config": config_name,
+            "runs_per_scenario": runs,
+            "seed": seed,
+            "scenarios": tally.reports,
+            "false_alarms": tally.free_alarms,
+            "false_alarms_per_hour": tally.alarms_per_hour(),
+            "free_motion_hours": tally.free_hours,
+            "simulated_s_per_wall_s": speed,
+        });
+        write_atomically(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    Ok(())
+}
+
+fn demo(out: &Path) -> Result<()> {
+    let (detector, config_name) = load_detector(None)?;
+    std::fs::create_dir_all(out).with_context(|| out.display().to_string())?;
+    let runs = [
+        ("contact_hard_8", "Contact, hard object, 8 cm/s"),
+        ("contact_soft_2", "Contact, soft object, 2 cm/s"),
+        ("disturbance_large_5", "Disturbance (vibration), 5 cm/s"),
+        ("link_collision_8", "Link collision, 8 cm/s"),
+        (
+            "sudden_accel_moving_5",
+            "Sudden acceleration while moving, 5 cm/s",
+        ),
+    ];
+    println!("fingertip demo: {config_name}, nominal Table 1 runs, event at t = 20 ms\n");
+    let mut traces = Vec::new();
+    let mut recs = Vec::new();
+    for (name, _) in runs {
+        let scenario: Scenario = name.parse()?;
+        let trace = sim::simulate(
+            &scenario,
+            &SimOptions {
+                seed: 1,
+                randomize: false,
+                ..SimOptions::default()
+            },
+        )?;
+        recs.push(record(&detector, &trace)?);
+        traces.push((scenario, trace));
+    }
+    let mut plots = Vec::new();
+    for (((scenario, trace), rec), (_, title)) in traces.iter().zip(&recs).zip(runs) {
+        let truth = truth_of(trace);
+        let expected = scenario
+            .expected()
+            .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+        let verdict = match score::classify(expected, &rec.decisions) {
+            Outcome::Correct { latency_s } => format!(
+                "{} confirmed {:.2} ms after onset",
+                scenario.expected().unwrap_or(""),
+                latency_s * 1e3
+            ),
+            Outcome::QuietAsExpected => "nothing confirmed, as expected".to_string(),
+            Outcome::Missed => "MISSED".to_string(),
+            Outcome::Wrong { event, t_s } => {
+                format!("WRONG: {event} confirmed at {:.2} ms", t_s * 1e3)
+            }
+        };
+        println!("{title}: {verdict}");
+        for d in &rec.decisions {
+            println!("  {}", describe(d, truth.as_ref()));
+        }
+        let run = RunPlot {
+            title: title.to_string(),
+            t: trace.time(),
+            series: rec.series.clone(),
+            truth,
+            decisions: &rec.decisions,
+        };
+        for ext in ["png", "svg"] {
+            let p = out.join(format!("{}.{ext}", scenario.name()));
+            plot::write_run(&p, &run)?;
+        }
+        plots.push(run);
+    }
+    let figure: Vec<RunPlot<'_>> = plots.iter().take(4).cloned().collect();
+    for ext in ["png", "svg"] {
+        let p = out.join(format!("figure4.{ext}"));
+        plot::write_grid(&p, &figure, 2, (800, 380))?;
+    }
+    println!(
+        "\nfigures: {}/figure4.png (.svg) and one per run",
+        out.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,803 @@
+//! The fingertip simulator: the approach phase of a planar, position-controlled finger with
+//! a soft sensing fingertip, reproducing the paper's Table 1 runs and event-free motion.
+//!
+//! [`simulate`] runs one [`Scenario`] and returns a [`Trace`] in the project's one trace
+//! format, with the ten input channels of [`CHANNELS`], a `phase` column (`approach`) and a
+//! `truth` column (the expected event's name from its physical onset on).
+//!
+//! - The physics is integrated at an internal rate of at least 50 kHz (an integer multiple
+//!   of the detector rate) and every analog channel passes an anti-alias filter
+//!   ([`filters`]) before it is sampled at the detector rate (5 kHz by default).
+//! - Nominal runs (`randomize: false`) use the nominal parameters of [`params`]; only the
+//!   sensor noise and hum phases depend on the seed. Randomized runs draw every parameter
+//!   the scenario uses from its documented range. Either way the same scenario, options
+//!   and seed give an identical trace.
+//! - `docs/simulator.md` describes the model, the numbers and their ranges.
+
+pub mod filters;
+pub mod params;
+
+mod engine;
+mod trajectory;
+
+use crate::trace::{Labels, Trace, TraceError};
+use engine::{DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup};
+use params::{
+    HardObject, LargeDisturbance, Motion, MovableObject, Obstacle, Plant, Sensors,
+    SmallDisturbance, SoftObject, SuddenAccel,
+};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+use std::fmt;
+use std::str::FromStr;
+use trajectory::Trajectory;
+
+pub use filters::{ANTI_ALIAS_CUTOFF_RATIO, AntiAliasFilter, decimate};
+
+/// The event name of a fingertip contact.
+pub const CONTACT: &str = "contact";
+/// The event name of a collision of the finger's proximal link.
+pub const LINK_COLLISION: &str = "link_collision";
+/// The event name of an external disturbance.
+pub const DISTURBANCE: &str = "disturbance";
+/// The phase every simulated row is in.
+pub const APPROACH: &str = "approach";
+
+/// The internal (integration) rate is the smallest multiple of the detector rate that is
+/// at least this, and at least 4 times the detector rate.
+pub const MIN_INTERNAL_RATE_HZ: f64 = 50_000.0;
+/// The default detector rate.
+pub const DEFAULT_RATE_HZ: f64 = 5000.0;
+/// The default rate of the robot controller's ticks (context updates).
+pub const DEFAULT_CONTROLLER_RATE_HZ: f64 = 1000.0;
+/// Length of a Table 1 run after the event's onset.
+pub const AFTER_ONSET_S: f64 = 0.130;
+/// Default length of a free-motion run.
+pub const FREE_MOTION_S: f64 = 10.0;
+
+/// A 12-bit bipolar ADC channel: codes -2048..=2047, one LSB = 2 x full scale / 4096.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Adc12 {
+    /// The reading clips at +- this (in the channel's unit).
+    pub full_scale: f64,
+    /// RMS of the white noise at the ADC input at noise scale 1 (in the channel's unit).
+    pub noise_rms: f64,
+}
+
+/// One input channel of a simulated trace.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ChannelSpec {
+    /// The column name.
+    pub name: &'static str,
+    /// The SI unit.
+    pub unit: &'static str,
+    /// The ADC, for analog channels sampled on the fingertip; `None` for the context the
+    /// controller sends (held between its ticks).
+    pub adc: Option<Adc12>,
+    /// What the channel is.
+    pub doc: &'static str,
+}
+
+/// The channels of a simulated trace, in column order.
+pub const CHANNELS: [ChannelSpec; 10] = [
+    ChannelSpec {
+        name: "force_x",
+        unit: "N",
+        adc: Some(Adc12 {
+            full_scale: 20.0,
+            noise_rms: 0.01,
+        }),
+        doc: "fingertip force sensor, x (pad normal): force of the environment on the fingertip plus the inertial load of the fingertip's own mass",
+    },
+    ChannelSpec {
+        name: "force_y",
+        unit: "N",
+        adc: Some(Adc12 {
+            full_scale: 20.0,
+            noise_rms: 0.01,
+        }),
+        doc: "fingertip force sensor, y (tangential)",
+    },
+    ChannelSpec {
+        name: "skin_accel",
+        unit: "m/s^2",
+        adc: Some(Adc12 {
+            full_scale: 500.0,
+            noise_rms: 0.5,
+        }),
+        doc: "skin accelerometer, along x, AC-coupled",
+    },
+    ChannelSpec {
+        name: "stress_rate",
+        unit: "N/s",
+        adc: Some(Adc12 {
+            full_scale: 1000.0,
+            noise_rms: 0.5,
+        }),
+        doc: "skin stress-rate sensor (PVDF film and charge amplifier), calibrated as the rate of the normal contact force",
+    },
+    ChannelSpec {
+        name: "pos_err_x",
+        unit: "m",
+        adc: None,
+        doc: "tip position error from the controller: commanded minus encoder-measured position, x (1 um resolution)",
+    },
+    ChannelSpec {
+        name: "pos_err_y",
+        unit: "m",
+        adc: None,
+        doc: "tip position error, y",
+    },
+    ChannelSpec {
+        name: "vel_des_x",
+        unit: "m/s",
+        adc: None,
+        doc: "commanded tip velocity, x",
+    },
+    ChannelSpec {
+        name: "vel_des_y",
+        unit: "m/s",
+        adc: None,
+        doc: "commanded tip velocity, y",
+    },
+    ChannelSpec {
+        name: "acc_des_x",
+        unit: "m/s^2",
+        adc: None,
+        doc: "commanded tip acceleration, x",
+    },
+    ChannelSpec {
+        name: "acc_des_y",
+        unit: "m/s^2",
+        adc: None,
+        doc: "commanded tip acceleration, y",
+    },
+];
+
+/// Metadata key of the physical onset time in seconds (absent when nothing happened).
+pub const META_ONSET: &str = "onset_s";
+/// Metadata key of the scenario name.
+pub const META_SCENARIO: &str = "scenario";
+/// Metadata key of the expected event (`none` when no event should be confirmed).
+pub const META_EXPECTED: &str = "expected";
+
+/// A simulated run: one of the paper's Table 1 runs, or event-free motion.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Scenario {
+    /// Contact with a hard object at 8 cm/s.
+    ContactHard8,
+    /// Contact with a hard object at 5 cm/s.
+    ContactHard5,
+    /// Contact with a hard object at 2 cm/s.
+    ContactHard2,
+    /// Contact with a soft object at 8 cm/s.
+    ContactSoft8,
+    /// Contact with a soft object at 5 cm/s.
+    ContactSoft5,
+    /// Contact with a soft object at 2 cm/s.
+    ContactSoft2,
+    /// Contact at 5 cm/s with an object that slides away on its table.
+    ObjectMoves5,
+    /// The proximal link strikes an obstacle at 8 cm/s.
+    LinkCollision8,
+    /// The proximal link strikes an obstacle at 2 cm/s.
+    LinkCollision2,
+    /// A large disturbance while moving at 5 cm/s.
+    DisturbanceLarge5,
+    /// A small disturbance while moving at 5 cm/s.
+    DisturbanceSmall5,
+    /// A sudden commanded acceleration from standstill.
+    SuddenAccelStandstill,
+    /// A sudden commanded acceleration while moving at 5 cm/s.
+    SuddenAccelMoving5,
+    /// Random event-free motion (pauses and moves, sudden ones included), no contact.
+    FreeMotion,
+}
+
+/// What happens in a scenario.
+#[derive(Clone, Copy, Debug)]
+enum Kind {
+    Contact(ObjectKind),
+    Collision,
+    Disturbance { large: bool },
+    SuddenAccel,
+    Free,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum ObjectKind {
+    Hard,
+    Soft,
+    Movable,
+}
+
+impl Scenario {
+    /// Every scenario: the 13 Table 1 runs, then free motion.
+    pub const ALL: [Scenario; 14] = [
+        Scenario::ContactHard8,
+        Scenario::ContactHard5,
+        Scenario::ContactHard2,
+        Scenario::ContactSoft8,
+        Scenario::ContactSoft5,
+        Scenario::ContactSoft2,
+        Scenario::ObjectMoves5,
+        Scenario::LinkCollision8,
+        Scenario::LinkCollision2,
+        Scenario::DisturbanceLarge5,
+        Scenario::DisturbanceSmall5,
+        Scenario::SuddenAccelStandstill,
+        Scenario::SuddenAccelMoving5,
+        Scenario::FreeMotion,
+    ];
+
+    /// Every scenario: the 13 Table 1 runs, then free motion.
+    pub fn all() -> &'static [Scenario] {
+        &Scenario::ALL
+    }
+
+    /// The 13 runs of the paper's Table 1.
+    pub fn table1() -> &'static [Scenario] {
+        &Scenario::ALL[..13]
+    }
+
+    /// The scenario's name, e.g. `contact_hard_8`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Scenario::ContactHard8 => "contact_hard_8",
+            Scenario::ContactHard5 => "contact_hard_5",
+            Scenario::ContactHard2 => "contact_hard_2",
+            Scenario::ContactSoft8 => "contact_soft_8",
+            Scenario::ContactSoft5 => "contact_soft_5",
+            Scenario::ContactSoft2 => "contact_soft_2",
+            Scenario::ObjectMoves5 => "object_moves_5",
+            Scenario::LinkCollision8 => "link_collision_8",
+            Scenario::LinkCollision2 => "link_collision_2",
+            Scenario::DisturbanceLarge5 => "disturbance_large_5",
+            Scenario::DisturbanceSmall5 => "disturbance_small_5",
+            Scenario::SuddenAccelStandstill => "sudden_accel_standstill",
+            Scenario::SuddenAccelMoving5 => "sudden_accel_moving_5",
+            Scenario::FreeMotion => "free_motion",
+        }
+    }
+
+    /// The scenario with this name.
+    pub fn from_name(name: &str) -> Option<Scenario> {
+        Scenario::ALL.into_iter().find(|s| s.name() == name)
+    }
+
+    /// The event a detector should confirm: `contact`, `link_collision`, `disturbance`,
+    /// or `None` (sudden acceleration and free motion: nothing may be confirmed).
+    pub fn expected(self) -> Option<&'static str> {
+        match self.kind() {
+            Kind::Contact(_) => Some(CONTACT),
+            Kind::Collision => Some(LINK_COLLISION),
+            Kind::Disturbance { .. } => Some(DISTURBANCE),
+            Kind::SuddenAccel | Kind::Free => None,
+        }
+    }
+
+    /// The nominal commanded speed before the event, in m/s (0 for free motion and the
+    /// standstill start).
+    pub fn nominal_speed(self) -> f64 {
+        match self {
+            Scenario::ContactHard8 | Scenario::ContactSoft8 | Scenario::LinkCollision8 => 0.08,
+            Scenario::ContactHard2 | Scenario::ContactSoft2 | Scenario::LinkCollision2 => 0.02,
+            Scenario::SuddenAccelStandstill | Scenario::FreeMotion => 0.0,
+            _ => 0.05,
+        }
+    }
+
+    /// One line saying what happens.
+    pub fn description(self) -> &'static str {
+        match self {
+            Scenario::ContactHard8 => "fingertip contacts a hard object at 8 cm/s",
+            Scenario::ContactHard5 => "fingertip contacts a hard object at 5 cm/s",
+            Scenario::ContactHard2 => "fingertip contacts a hard object at 2 cm/s",
+            Scenario::ContactSoft8 => "fingertip contacts a soft object at 8 cm/s",
+            Scenario::ContactSoft5 => "fingertip contacts a soft object at 5 cm/s",
+            Scenario::ContactSoft2 => "fingertip contacts a soft object at 2 cm/s",
+            Scenario::ObjectMoves5 => "fingertip contacts, at 5 cm/s, an object that slides away",
+            Scenario::LinkCollision8 => "proximal link strikes an obstacle at 8 cm/s",
+            Scenario::LinkCollision2 => "proximal link strikes an obstacle at 2 cm/s",
+            Scenario::DisturbanceLarge5 => {
+                "large shock or vibration reaches the fingertip while moving at 5 cm/s"
+            }
+            Scenario::DisturbanceSmall5 => {
+                "small shock or vibration reaches the fingertip while moving at 5 cm/s"
+            }
+            Scenario::SuddenAccelStandstill => "sudden commanded acceleration from standstill",
+            Scenario::SuddenAccelMoving5 => "sudden commanded acceleration while moving at 5 cm/s",
+            Scenario::FreeMotion => "random event-free motion, touching nothing",
+        }
+    }
+
+    fn kind(self) -> Kind {
+        match self {
+            Scenario::ContactHard8 | Scenario::ContactHard5 | Scenario::ContactHard2 => {
+                Kind::Contact(ObjectKind::Hard)
+            }
+            Scenario::ContactSoft8 | Scenario::ContactSoft5 | Scenario::ContactSoft2 => {
+                Kind::Contact(ObjectKind::Soft)
+            }
+            Scenario::ObjectMoves5 => Kind::Contact(ObjectKind::Movable),
+            Scenario::LinkCollision8 | Scenario::LinkCollision2 => Kind::Collision,
+            Scenario::DisturbanceLarge5 => Kind::Disturbance { large: true },
+            Scenario::DisturbanceSmall5 => Kind::Disturbance { large: false },
+            Scenario::SuddenAccelStandstill | Scenario::SuddenAccelMoving5 => Kind::SuddenAccel,
+            Scenario::FreeMotion => Kind::Free,
+        }
+    }
+}
+
+impl fmt::Display for Scenario {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The name is not one of [`Scenario::all`]'s.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, free_motion)"
+)]
+pub struct UnknownScenario(pub String);
+
+impl FromStr for Scenario {
+    type Err = UnknownScenario;
+
+    fn from_str(s: &str) -> Result<Scenario, UnknownScenario> {
+        Scenario::from_name(s).ok_or_else(|| UnknownScenario(s.to_string()))
+    }
+}
+
+/// How to run a simulation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimOptions {
+    /// Seeds every random draw (parameters, free-motion trajectory, noise). The scenario's
+    /// name is mixed in, so equal seeds of different scenarios are independent.
+    pub seed: u64,
+    /// Draw the physical and sensor parameters from their ranges (true) or use the
+    /// nominal ones (false: the Table 1 reproductions, event at 20 ms).
+    pub randomize: bool,
+    /// The detector rate: the trace's sampling rate (200 Hz to 20 kHz).
+    pub rate_hz: f64,
+    /// The robot controller's tick rate (500 Hz to 10 kHz): context updates and position
+    /// control.
+    pub controller_rate_hz: f64,
+    /// Length of the run in seconds (at most 3600). `None`: onset + 130 ms for Table 1
+    /// runs, 10 s for free motion.
+    pub duration_s: Option<f64>,
+}
+
+impl Default for SimOptions {
+    fn default() -> SimOptions {
+        SimOptions {
+            seed: 0,
+            randomize: false,
+            rate_hz: DEFAULT_RATE_HZ,
+            controller_rate_hz: DEFAULT_CONTROLLER_RATE_HZ,
+            duration_s: None,
+        }
+    }
+}
+
+/// Why a simulation could not run.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum SimError {
+    /// An option is out of its range.
+    #[error("simulation option `{name}` = {value} is out of range: {reason}")]
+    BadOption {
+        /// The option.
+        name: &'static str,
+        /// Its value.
+        value: f64,
+        /// The allowed range.
+        reason: &'static str,
+    },
+    /// The trace could not be built (a bug: the simulator's output is always valid).
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+}
+
+fn check(
+    name: &'static str,
+    value: f64,
+    lo: f64,
+    hi: f64,
+    reason: &'static str,
+) -> Result<(), SimError> {
+    if value.is_finite() && value >= lo && value <= hi {
+        Ok(())
+    } else {
+        Err(SimError::BadOption {
+            name,
+            value,
+            reason,
+        })
+    }
+}
+
+/// The internal integration rate's oversampling factor for a detector rate.
+pub fn oversampling(rate_hz: f64) -> usize {
+    ((MIN_INTERNAL_RATE_HZ / rate_hz).ceil() as usize).max(4)
+}
+
+/// A 64-bit mix (SplitMix64's finalizer).
+fn mix(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// The seed of one random stream of one run: the user's seed, the scenario's name
+/// (FNV-1a) and the stream number, mixed.
+fn stream_seed(seed: u64, scenario: &str, stream: u64) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scenario.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    mix(mix(seed ^ h).wrapping_add(stream.wrapping_mul(0x9e37_79b9_7f4a_7c15)))
+}
+
+/// The golden runs that the bit-exactness check on the Cortex-M4 and the tick benchmark
+/// share: every nominal Table 1 run, then one second of free motion, at `rate_hz`.
+pub fn golden_runs(rate_hz: f64) -> Result<Vec<(Scenario, Trace)>, SimError> {
+    Scenario::table1()
+        .iter()
+        .chain([&Scenario::FreeMotion])
+        .map(|scenario| {
+            let opts = SimOptions {
+                rate_hz,
+                duration_s: (*scenario == Scenario::FreeMotion).then_some(1.0),
+                ..SimOptions::default()
+            };
+            simulate(scenario, &opts).map(|t| (*scenario, t))
+        })
+        .collect()
+}
+
+/// Checks the options' ranges.
+fn check_options(opts: &SimOptions) -> Result<(), SimError> {
+    check("rate_hz", opts.rate_hz, 200.0, 20_000.0, "200 Hz to 20 kHz")?;
+    check(
+        "controller_rate_hz",
+        opts.controller_rate_hz,
+        500.0,
+        10_000.0,
+        "500 Hz to 10 kHz (the position loop is unstable much below)",
+    )?;
+    if let Some(d) = opts.duration_s {
+        check(
+            "duration_s",
+            d,
+            2.0 / opts.rate_hz,
+            3600.0,
+            "two samples to 3600 s",
+        )?;
+    }
+    Ok(())
+}
+
+/// Runs one scenario and returns its trace.
+///
+/// The trace has the columns `t`, the ten [`CHANNELS`], `phase` and `truth`, and metadata
+/// comments: the scenario, expected event, seed, options, the physical onset
+/// ([`META_ONSET`]), each channel's unit and full scale, and every parameter's value.
+pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimError> {
+    let scenario = *scenario;
+    check_options(opts)?;
+    let name = scenario.name();
+    let mut prng = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 0));
+    let mut noise = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 1));
+    let mut traj_rng = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 2));
+    let r = opts.randomize;
+    let plant = Plant::choose(&mut prng, r);
+    let sensors = Sensors::choose(&mut prng, r);
+    let mut meta: Vec<(String, String)> = Vec::new();
+    let mut values: Vec<(String, f64)> = plant.values();
+    values.extend(sensors.values());
+    let scene = match scenario.kind() {
+        Kind::Free => free_motion_scene(opts, &mut traj_rng),
+        kind => approach_scene(scenario, kind, opts, &mut prng, &mut values, &mut meta),
+    };
+
+    let duration = opts.duration_s.unwrap_or(scene.default_duration);
+    let rows = (duration * opts.rate_hz).round() as usize + 1;
+    let n_over = oversampling(opts.rate_hz);
+    let mut setup = Setup {
+        plant,
+        sensors,
+        trajectory: scene.trajectory,
+        object: scene.object,
+        obstacle: scene.obstacle,
+        disturbance: scene.disturbance,
+        rows,
+        rate_hz: opts.rate_hz,
+        oversampling: n_over,
+        controller_rate_hz: opts.controller_rate_hz,
+    };
+    let out = engine::run(&mut setup, &mut noise);
+
+    let t: Vec<f64> = (0..rows).map(|k| k as f64 / opts.rate_hz).collect();
+    let onset = out.onset;
+    let truth = truth(scenario, onset, &t);
+    let channels = CHANNELS
+        .iter()
+        .zip(out.channels)
+        .map(|(c, v)| (c.name.to_string(), v))
+        .collect();
+    let mut trace = Trace::from_columns(name, t, channels)?
+        .with_phase(Labels::uniform(APPROACH, rows))?
+        .with_truth(truth)?;
+
+    push_metadata(
+        &mut trace,
+        scenario,
+        opts,
+        n_over,
+        scene.scheduled_onset,
+        onset.map(|o| o.0),
+        &meta,
+        &values,
+    )?;
+    Ok(trace)
+}
+
+/// What a scenario puts in the finger's way, and the motion it commands.
+struct Scene {
+    trajectory: Trajectory,
+    object: Option<ObjectSetup>,
+    obstacle: Option<ObstacleSetup>,
+    disturbance: Option<DisturbanceSetup>,
+    /// When the event is due, for scenarios whose event the setup places.
+    scheduled_onset: Option<f64>,
+    /// The run's length when the options set none.
+    default_duration: f64,
+}
+
+/// Random event-free motion, long enough for the run.
+fn free_motion_scene(opts: &SimOptions, traj_rng: &mut Xoshiro256PlusPlus) -> Scene {
+    let period = 1.0 / opts.controller_rate_hz;
+    let d = opts.duration_s.unwrap_or(FREE_MOTION_S);
+    let ticks = (d * opts.controller_rate_hz).ceil() as u64 + 1;
+    Scene {
+        trajectory: Trajectory::free_motion(period, ticks, traj_rng),
+        object: None,
+        obstacle: None,
+        disturbance: None,
+        scheduled_onset: None,
+        default_duration: FREE_MOTION_S,
+    }
+}
+
+/// An approach at the scenario's speed with its event (`kind`) at the motion's onset, every
+/// parameter drawn and recorded in `values`; the scenario's own entries go to `meta`.
+fn approach_scene(
+    scenario: Scenario,
+    kind: Kind,
+    opts: &SimOptions,
+    prng: &mut Xoshiro256PlusPlus,
+    values: &mut Vec<(String, f64)>,
+    meta: &mut Vec<(String, String)>,
+) -> Scene {
+    let r = opts.randomize;
+    let period = 1.0 / opts.controller_rate_hz;
+    let motion = Motion::choose(prng, r);
+    values.extend(motion.values());
+    let speed = scenario.nominal_speed() * motion.speed_factor;
+    let dir = [motion.approach_angle.cos(), motion.approach_angle.sin()];
+    let v0 = [speed * dir[0], speed * dir[1]];
+    let onset = motion.onset;
+    let mut scene = Scene {
+        trajectory: Trajectory::new(period, v0),
+        object: None,
+        obstacle: None,
+        disturbance: None,
+        scheduled_onset: None,
+        default_duration: onset + AFTER_ONSET_S,
+    };
+    match kind {
+        Kind::Contact(ok) => {
+            scene.object = Some(contact_object(ok, v0[0] * onset, prng, r, values));
+            scene.scheduled_onset = Some(onset);
+        }
+        Kind::Collision => {
+            let o = Obstacle::choose(prng, r);
+            values.extend(o.values());
+            scene.obstacle = Some(ObstacleSetup {
+                position: v0[0] * onset,
+                stiffness: o.stiffness,
+                damping: o.damping,
+            });
+            scene.scheduled_onset = Some(onset);
+        }
+        Kind::Disturbance { large } => {
+            scene.disturbance = Some(disturbance_setup(large, onset, prng, r, values, meta));
+            scene.scheduled_onset = Some(onset);
+        }
+        Kind::SuddenAccel => {
+            let a = SuddenAccel::choose(prng, r);
+            values.extend(a.values());
+            let start = (onset / period).round() as u64;
+            let ticks = ((a.velocity_change / a.amplitude / period).round() as u64).max(1);
+            let acc = [a.amplitude * dir[0], a.amplitude * dir[1]];
+            scene.trajectory.set_accel(start, acc);
+            scene.trajectory.set_accel(start + ticks, [0.0; 2]);
+            meta.push(("command_onset_s".into(), fmt_f64(start as f64 * period)));
+        }
+        Kind::Free => {}
+    }
+    scene
+}
+
+/// The truth column over the sample times `t`: the name of the event that happened from
+/// the first sample at or after its physical `onset` on, when the scenario expects one.
+fn truth(scenario: Scenario, onset: Option<(f64, Happened)>, t: &[f64]) -> Labels {
+    let rows = t.len();
+    let truth_start = match (scenario.expected(), onset) {
+        (Some(_), Some((t_on, _))) => t.iter().position(|&tk| tk >= t_on).unwrap_or(rows),
+        _ => rows,
+    };
+    let label = match onset.map(|o| o.1) {
+        Some(Happened::Contact) => CONTACT,
+        Some(Happened::Collision) => LINK_COLLISION,
+        Some(Happened::Disturbance) => DISTURBANCE,
+        None => "",
+    };
+    Labels::switch_at("", label, truth_start, rows)
+}
+
+/// The object a contact scenario touches, its surface at `surface`, with its parameters
+/// drawn (and recorded in `values`).
+fn contact_object(
+    kind: ObjectKind,
+    surface: f64,
+    prng: &mut Xoshiro256PlusPlus,
+    r: bool,
+    values: &mut Vec<(String, f64)>,
+) -> ObjectSetup {
+    let (stiffness, damping, movable) = match kind {
+        ObjectKind::Hard => {
+            let o = HardObject::choose(prng, r);
+            values.extend(o.values());
+            (o.stiffness, o.damping, None)
+        }
+        ObjectKind::Soft => {
+            let o = SoftObject::choose(prng, r);
+            values.extend(o.values());
+            (o.stiffness, o.damping, None)
+        }
+        ObjectKind::Movable => {
+            let o = MovableObject::choose(prng, r);
+            values.extend(o.values());
+            (
+                o.stiffness,
+                o.damping,
+                Some((o.mass, o.friction, o.friction * o.static_ratio)),
+            )
+        }
+    };
+    ObjectSetup {
+        surface,
+        stiffness,
+        damping,
+        movable,
+    }
+}
+
+/// A disturbance of the given size starting at `onset`, with its parameters drawn
+/// (recorded in `values`) and its kind and direction recorded in `meta`.
+fn disturbance_setup(
+    large: bool,
+    onset: f64,
+    prng: &mut Xoshiro256PlusPlus,
+    r: bool,
+    values: &mut Vec<(String, f64)>,
+    meta: &mut Vec<(String, String)>,
+) -> DisturbanceSetup {
+    // Both groups have the same fields; take the one of this size.
+    let (peak, duration, amplitude, frequency, burst, offset) = if large {
+        let d = LargeDisturbance::choose(prng, r);
+        values.extend(d.values());
+        (
+            d.impulse_peak,
+            d.impulse_duration,
+            d.vibration_amplitude,
+            d.vibration_frequency,
+            d.vibration_duration,
+            d.direction_offset,
+        )
+    } else {
+        let d = SmallDisturbance::choose(prng, r);
+        values.extend(d.values());
+        (
+            d.impulse_peak,
+            d.impulse_duration,
+            d.vibration_amplitude,
+            d.vibration_frequency,
+            d.vibration_duration,
+            d.direction_offset,
+        )
+    };
+    // Nominal: a vibration against the approach (-x). Randomized: impulse or
+    // vibration, towards +x or -x, each equally likely.
+    let impulse = r && prng.random::<f64>() < 0.5;
+    let towards_plus_x = r && prng.random::<f64>() < 0.5;
+    let base = if towards_plus_x {
+        0.0
+    } else {
+        std::f64::consts::PI
+    };
+    let kind = if impulse {
+        DisturbanceKind::Impulse { peak, duration }
+    } else {
+        DisturbanceKind::Vibration {
+            amplitude,
+            frequency,
+            duration: burst,
+        }
+    };
+    meta.push((
+        "disturbance_kind".into(),
+        if impulse { "impulse" } else { "vibration" }.into(),
+    ));
+    meta.push(("disturbance_direction_rad".into(), fmt_f64(base + offset)));
+    DisturbanceSetup {
+        start: onset,
+        kind,
+        direction: base + offset,
+    }
+}
+
+/// Writes the run's metadata: scenario, options, onsets, the scenario's own entries
+/// (`meta`), each channel's unit and full scale, and every parameter's value.
+#[allow(
+    clippy::too_many_arguments,
+    reason = "one argument per metadata source"
+)]
+fn push_metadata(
+    trace: &mut Trace,
+    scenario: Scenario,
+    opts: &SimOptions,
+    n_over: usize,
+    scheduled_onset: Option<f64>,
+    onset: Option<f64>,
+    meta: &[(String, String)],
+    values: &[(String, f64)],
+) -> Result<(), SimError> {
+    let name = scenario.name();
+    trace.push_metadata(META_SCENARIO, name)?;
+    trace.push_metadata("description", scenario.description())?;
+    trace.push_metadata(META_EXPECTED, scenario.expected().unwrap_or("none"))?;
+    trace.push_metadata("seed", &opts.seed.to_string())?;
+    trace.push_metadata("randomized", &opts.randomize.to_string())?;
+    trace.push_metadata("rate_hz", &fmt_f64(opts.rate_hz))?;
+    trace.push_metadata("controller_rate_hz", &fmt_f64(opts.controller_rate_hz))?;
+    trace.push_metadata("internal_rate_hz", &fmt_f64(opts.rate_hz * n_over as f64))?;
+    if let Some(s) = scheduled_onset {
+        trace.push_metadata("scheduled_onset_s", &fmt_f64(s))?;
+    }
+    if let Some(t_on) = onset {
+        trace.push_metadata(META_ONSET, &fmt_f64(t_on))?;
+    }
+    for (k, v) in meta {
+        trace.push_metadata(k, v)?;
+    }
+    for c in &CHANNELS {
+        trace.push_metadata(&format!("unit.{}", c.name), c.unit)?;
+        if let Some(adc) = c.adc {
+            trace.push_metadata(&format!("full_scale.{}", c.name), &fmt_f64(adc.full_scale))?;
+        }
+    }
+    for (k, v) in values {
+        trace.push_metadata(&format!("param.{k}"), &fmt_f64(*v))?;
+    }
+    Ok(())
+}
+
+/// Shortest decimal that reads back to the same `f64`.
+fn fmt_f64(v: f64) -> String {
+    format!("{v}")
+}

@@ -1,0 +1,290 @@
+//! The `fingertip` command end to end: the Table 1 reproduction, the JSON outputs, the CAN
+//! log round trip, and bad input rejected with one clear line and no output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn fingertip(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_fingertip"))
+        .args(args)
+        .output()
+        .expect("the fingertip binary runs")
+}
+
+/// A fresh directory of its own for each call (tests run in parallel).
+fn scratch(name: &str) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("fingertip-cli-{}-{name}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+fn simulate(dir: &Path, scenario: &str) -> PathBuf {
+    let path = dir.join(format!("{scenario}.csv"));
+    let out = fingertip(&[
+        "simulate",
+        scenario,
+        "--out",
+        path.to_str().expect("utf-8 path"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    path
+}
+
+/// Every nominal Table 1 run confirms its expected event first (and the sudden
+/// accelerations nothing), within the paper's 20 ms.
+#[test]
+fn nominal_table1_runs_detect_the_right_event() {
+    let dir = scratch("table1");
+    let list = text(&fingertip(&["scenarios"]).stdout);
+    let runs: Vec<(String, String)> = list
+        .lines()
+        .filter_map(|l| {
+            let mut w = l.split_whitespace();
+            Some((w.next()?.to_string(), w.next()?.to_string()))
+        })
+        .filter(|(name, _)| name != "free_motion")
+        .collect();
+    assert_eq!(runs.len(), 13, "{list}");
+    for (scenario, expected) in runs {
+        let trace = simulate(&dir, &scenario);
+        let out = fingertip(&["replay", trace.to_str().expect("utf-8"), "--json"]);
+        assert!(out.status.success(), "{scenario}: {}", text(&out.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
+        let confirms: Vec<&serde_json::Value> = report["events"]
+            .as_array()
+            .expect("events")
+            .iter()
+            .filter(|e| e["level"] == "confirm")
+            .collect();
+        if expected == "none" {
+            assert!(confirms.is_empty(), "{scenario}: {confirms:?}");
+            continue;
+        }
+        let first = confirms
+            .first()
+            .unwrap_or_else(|| panic!("{scenario}: nothing confirmed"));
+        assert_eq!(first["event"], expected.as_str(), "{scenario}");
+        let onset = report["truth"]["onset_s"].as_f64().expect("truth onset");
+        let t = first["t_s"].as_f64().expect("t_s");
+        assert!(first["onset_s"].as_f64().expect("onset_s") <= t);
+        assert!(
+            t >= onset && t - onset <= 0.020,
+            "{scenario}: confirmed {:.1} ms after onset",
+            (t - onset) * 1e3
+        );
+    }
+}
+
+#[test]
+fn evaluate_writes_the_documented_report() {
+    let dir = scratch("evaluate");
+    let json = dir.join("report.json");
+    let out = fingertip(&[
+        "evaluate",
+        "--runs",
+        "2",
+        "--free-hours",
+        "0.005",
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("false alarms"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    let scenarios = report["scenarios"].as_array().expect("scenarios");
+    assert_eq!(scenarios.len(), 13);
+    for s in scenarios {
+        for key in ["name", "expected", "runs", "correct", "wrong", "missed"] {
+            assert!(!s[key].is_null(), "{key} missing in {s}");
+        }
+        for key in ["median", "p95", "p99", "max"] {
+            assert!(
+                s["latency_ms"][key].is_number(),
+                "latency_ms.{key} missing in {s}"
+            );
+        }
+        assert_eq!(s["runs"], 2);
+    }
+    assert!(report["false_alarms_per_hour"].is_number());
+    assert!(report["free_motion_hours"].as_f64().expect("hours") >= 0.005);
+}
+
+/// The frames the firmware would send decode back to the same confirmation.
+#[test]
+fn replay_candump_decodes_to_the_same_events() {
+    let dir = scratch("candump");
+    let trace = simulate(&dir, "contact_hard_8");
+    let log = dir.join("run.log");
+    let out = fingertip(&[
+        "replay",
+        trace.to_str().expect("utf-8"),
+        "--candump",
+        log.to_str().expect("utf-8"),
+        "--node",
+        "3",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let first = text(&std::fs::read(&log).expect("log"));
+    assert!(
+        first
+            .lines()
+            .all(|l| l.starts_with('(') && l.contains(" can0 ")),
+        "{first}"
+    );
+    let out = fingertip(&["decode", log.to_str().expect("utf-8"), "--quiet"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let decoded = text(&out.stdout);
+    assert!(
+        decoded.contains("node  3  EVENT     contact CONFIRM"),
+        "{decoded}"
+    );
+    assert!(decoded.contains("0 problems"), "{decoded}");
+}
+
+/// One line naming the file, row and column; non-zero exit; no output file left behind.
+fn rejects(trace_text: &str, config: Option<&str>, expect: &[&str]) {
+    let dir = scratch("bad");
+    let trace = dir.join("bad.csv");
+    std::fs::write(&trace, trace_text).expect("write");
+    let out_csv = dir.join("out.csv");
+    let mut args = vec![
+        "replay",
+        trace.to_str().expect("utf-8"),
+        "--out",
+        out_csv.to_str().expect("utf-8"),
+    ];
+    let config_path = dir.join("config.toml");
+    if let Some(c) = config {
+        std::fs::write(&config_path, c).expect("write");
+        args.extend(["--config", config_path.to_str().expect("utf-8")]);
+    }
+    let out = fingertip(&args);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success(), "accepted: {stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    for e in expect {
+        assert!(stderr.contains(e), "'{e}' not in: {stderr}");
+    }
+    assert!(!out_csv.exists(), "an output file was left behind");
+}
+
+const HEADER: &str = "t,force_x,force_y,skin_accel,stress_rate,pos_err_x,pos_err_y,vel_des_x,vel_des_y,acc_des_x,acc_des_y";
+
+#[test]
+fn bad_traces_are_rejected_clearly() {
+    rejects("", None, &["bad.csv", "empty"]);
+    rejects(
+        &format!("{HEADER}\n0,0,0,0,0,0,0,0,0,0,0\n0.0002,0,x,0,0,0,0,0,0,0,0\n"),
+        None,
+        &["bad.csv", "3", "force_y"],
+    );
+    rejects(
+        &format!(
+            "{HEADER}\n0,0,0,0,0,0,0,0,0,0,0\n0.0002,0,0,0,0,0,0,0,0,0,0\n0.0009,0,0,0,0,0,0,0,0,0,0\n"
+        ),
+        None,
+        &["bad.csv", "4", "t"],
+    );
+    rejects(
+        &format!("{HEADER}\n0.0002,0,0,0,0,0,0,0,0,0,0\n0,0,0,0,0,0,0,0,0,0,0\n"),
+        None,
+        &["bad.csv", "t"],
+    );
+    let missing = HEADER.replace(",stress_rate", "");
+    rejects(
+        &format!("{missing}\n0,0,0,0,0,0,0,0,0,0\n0.0002,0,0,0,0,0,0,0,0,0\n"),
+        None,
+        &["bad.csv", "stress_rate"],
+    );
+}
+
+#[test]
+fn bad_configurations_are_rejected_clearly() {
+    let good = fingertip::APPROACH_TOML;
+    let trace = format!("{HEADER}\n0,0,0,0,0,0,0,0,0,0,0\n0.0002,0,0,0,0,0,0,0,0,0,0\n");
+    let heavy = good.replacen("weight = 0.6", "weight = 0.9", 1);
+    rejects(
+        &trace,
+        Some(&heavy),
+        &["config.toml", "event 'contact'", "sum to 1.300"],
+    );
+    let unknown = good.replacen("input = \"force_x\"", "input = \"force_z\"", 1);
+    rejects(
+        &trace,
+        Some(&unknown),
+        &["config.toml", "feature 'force_ac'", "force_z"],
+    );
+    rejects(
+        &trace,
+        Some("rate_hz = 5000\n[[channel]]\nname = 1\n"),
+        &["config.toml", "line 3"],
+    );
+}
+
+/// A legal configuration with an event in no phase and a phase without events runs, with
+/// one warning line each on standard error naming the file and the item.
+#[test]
+fn configuration_warnings_are_printed_and_the_run_goes_on() {
+    let dir = scratch("warn");
+    let trace = dir.join("quiet.csv");
+    std::fs::write(
+        &trace,
+        format!("{HEADER}\n0,0,0,0,0,0,0,0,0,0,0\n0.0002,0,0,0,0,0,0,0,0,0,0\n"),
+    )
+    .expect("write");
+    let config = dir.join("idle.toml");
+    let idle = format!(
+        "{}\n[[phase]]\nname = \"idle\"\nevents = []\n",
+        fingertip::APPROACH_TOML
+    );
+    std::fs::write(&config, idle).expect("write");
+    let out = fingertip(&[
+        "replay",
+        trace.to_str().expect("utf-8"),
+        "--config",
+        config.to_str().expect("utf-8"),
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let warnings: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.starts_with("warning:"))
+        .collect();
+    assert_eq!(warnings.len(), 1, "{stderr}");
+    assert!(
+        warnings[0].contains("idle.toml") && warnings[0].contains("phase 'idle'"),
+        "{stderr}"
+    );
+}
+
+/// Counts no run could reach are refused at once with the limit, before any work and any
+/// allocation in proportion to them.
+#[test]
+fn evaluate_bounds_its_counts() {
+    for (args, expect) in [
+        (["--runs", "18446744073709551615"], "--runs"),
+        (["--runs", "0"], "--runs"),
+        (["--free-hours", "1e300"], "--free-hours = 1e300"),
+        (["--free-hours=-1", "--runs=1"], "--free-hours"),
+    ] {
+        let mut all = vec!["evaluate"];
+        all.extend(args);
+        let out = fingertip(&all);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{args:?} accepted");
+        assert!(
+            stderr.contains(expect) && stderr.contains("within"),
+            "{stderr}"
+        );
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    }
+}
