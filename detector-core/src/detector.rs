@@ -145,7 +145,7 @@ impl Detector {
         }
     }
 
-    /// Replaces this detector with the one in `image` (made by `Detector::to_image`),
+    /// Replaces this detector with the one in `image` (made by `detector_build::Compiled::image`),
     /// in place: the stack holds one event at a time, never a whole detector or
     /// configuration. Every value is checked; on error the detector is left empty (see
     /// [`Detector::empty`]) and the error names what was wrong.

@@ -2,7 +2,7 @@
 //! (the paper's eq. 14 and 17 and the doc comments of `detector_core`'s configuration
 //! types), independently of the fixed-point engine. The tests hold the engine to it.
 //!
-//! It takes the same [`Config`] as [`detector_core::Detector::build`] and channel samples as
+//! It takes the same [`Config`] as [`detector_build::build`] and channel samples as
 //! `f64` in each channel's working unit (SI × the channel's `scale`, as the engine's
 //! `Inputs` carry them; [`Model::working_unit`] converts), and produces per tick the feature
 //! values, the term confidences, the event confidences and the decisions, all in `f64` with
@@ -13,7 +13,7 @@
 //!   Signal range");
 //! - configuration parameters are the `f32` values of the [`Config`], widened exactly.
 //!
-//! The model trusts its configuration: validating it is [`detector_core::Detector::build`]'s
+//! The model trusts its configuration: validating it is [`detector_build::build`]'s
 //! job. [`Model::new`] only resolves names and fails on names it cannot resolve.
 //!
 //! # The definitions it implements
@@ -337,7 +337,7 @@ pub struct ModelOutput {
 
 impl Model {
     /// Resolves the configuration's names. Does not validate parameters: pass only
-    /// configurations that `Detector::build` accepts.
+    /// configurations that `detector_build::build` accepts.
     pub fn new(config: &Config) -> Result<Model, ModelError> {
         let channel_names: Vec<&str> = config.channels.iter().map(|c| c.name.as_str()).collect();
         let rate = f64::from(config.rate_hz);

@@ -4,7 +4,7 @@
 //! - arbitrary configurations — every `f32` parameter an arbitrary bit pattern (NaN,
 //!   infinities, subnormals, huge values) or a plausible value, names drawn from a small pool
 //!   (so duplicates, unknown names and empty names are common) or arbitrary strings — into
-//!   `Detector::build`;
+//!   `detector_build::build`;
 //! - for those that build, arbitrary samples (any 16.16 bits, the extremes included),
 //!   arbitrary fault masks, phase switches by arbitrary index and a free-running tick that
 //!   wraps, into `Detector::tick`; the outputs must be consistent: every confidence in
