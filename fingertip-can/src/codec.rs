@@ -747,7 +747,8 @@ impl FaultFlags {
     pub const BUS_ERROR: FaultFlags = FaultFlags(1 << 4);
     /// A frame could not be queued for sending since the last heartbeat.
     pub const TX_DROPPED: FaultFlags = FaultFlags(1 << 5);
-    /// The stored configuration was rejected; the built-in default runs.
+    /// The detector image was rejected (or the tick does not match it): the detector is out
+    /// of service and the fingertip sends only its status heartbeat.
     pub const CONFIG_FALLBACK: FaultFlags = FaultFlags(1 << 6);
     /// A sensor channel is flagged faulty.
     pub const SENSOR_FAULT: FaultFlags = FaultFlags(1 << 7);

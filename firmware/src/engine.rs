@@ -9,10 +9,15 @@
 //! core's interpreter too. A generated tick belongs to one detector image, and
 //! [`Engine::new`] refuses it for any other.
 //!
+//! When the detector cannot run (its image rejected, or an engine that cannot be set up
+//! for it) the board runs a [`Fallback`] instead: the detector out of service, the
+//! heartbeat on the bus with [`FaultFlags::CONFIG_FALLBACK`]. The detector task runs
+//! either through one [`Service`].
+//!
 //! The board's detector task only adds the cycle counter and the queues around
-//! [`Engine::tick`].
+//! [`TickRunner::step`].
 
-use detector_core::{Detector, DetectorTick, Inputs, Output, State, Tick};
+use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
 use fingertip_can::{
     CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status,
     Transmitter, TxConfigError, TxFrames, TxState,
@@ -129,6 +134,26 @@ impl core::fmt::Display for EngineError {
     }
 }
 
+/// Why the detector is out of service.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum FallbackReason {
+    /// The detector image was rejected by the loader.
+    Image(ImageError),
+    /// The engine cannot be set up for the detector loaded (a tick generated for
+    /// another image, a rate or a phase count outside the protocol's).
+    Engine(EngineError),
+}
+
+impl core::fmt::Display for FallbackReason {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            FallbackReason::Image(e) => write!(f, "the detector image was rejected: {e}"),
+            FallbackReason::Engine(e) => write!(f, "the engine cannot run the detector: {e}"),
+        }
+    }
+}
+
 /// What the rest of the board reports into the heartbeat, gathered by the detector task.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -141,7 +166,7 @@ pub struct Health {
     pub bus_errors: u32,
     /// Frames not sent since boot (queue full, mailbox replaced).
     pub tx_dropped: u32,
-    /// Flags latched since the last heartbeat (overrun, bus error, frame dropped).
+    /// Flags latched and not yet reported (overrun, bus error, frame dropped).
     pub latched: FaultFlags,
     /// The temperature sensor is faulty.
     pub sensor_fault: bool,
@@ -154,7 +179,8 @@ pub struct TickResult {
     pub output: Output,
     /// The frames to send, highest priority first.
     pub frames: TxFrames,
-    /// A heartbeat is among the frames: the latched flags it reported can be cleared.
+    /// A heartbeat is among the frames: once queued, the latched flags it reported can be
+    /// cleared.
     pub heartbeat: bool,
 }
 
@@ -164,6 +190,31 @@ pub const LATCHED_FLAGS: FaultFlags =
 
 fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
     ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
+}
+
+/// Whether `frame` is a status heartbeat page.
+fn is_status(frame: &CanFrame) -> bool {
+    MessageKind::from_raw_id(frame.id().as_raw()).is_some_and(|(k, _)| k == MessageKind::Status)
+}
+
+/// Copies the board's health into `status`: counters, the latched flags, the sensor
+/// fault (a faulty analog channel of `sample`, or the temperature sensor).
+fn report_health(status: &mut Status, health: &Health, sample: &AdcSample, tx_dropped: u32) {
+    status.overruns = health.overruns;
+    status.worst_tick = health.worst_tick;
+    status.bus_errors = health.bus_errors;
+    status.tx_dropped = health.tx_dropped.saturating_add(tx_dropped);
+    for flag in [
+        FaultFlags::OVERRUN,
+        FaultFlags::BUS_ERROR,
+        FaultFlags::TX_DROPPED,
+    ] {
+        status.faults.set(flag, health.latched.contains(flag));
+    }
+    status.faults.set(
+        FaultFlags::SENSOR_FAULT,
+        !sample.faults.is_empty() || health.sensor_fault,
+    );
 }
 
 /// The detector task's state and logic, running the tick `T`.
@@ -318,29 +369,11 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         self.tick
             .tick_into(&mut self.state, now, &self.inputs, &mut output);
 
-        let s = &mut self.status;
-        s.overruns = health.overruns;
-        s.worst_tick = health.worst_tick;
-        s.bus_errors = health.bus_errors;
-        s.tx_dropped = health.tx_dropped.saturating_add(self.tx.dropped());
-        for flag in [
-            FaultFlags::OVERRUN,
-            FaultFlags::BUS_ERROR,
-            FaultFlags::TX_DROPPED,
-        ] {
-            s.faults.set(flag, health.latched.contains(flag));
-        }
-        s.faults.set(
-            FaultFlags::SENSOR_FAULT,
-            !sample.faults.is_empty() || health.sensor_fault,
-        );
-
+        report_health(&mut self.status, health, sample, self.tx.dropped());
         let frames = self
             .transmitter
             .tick(&mut self.tx, now, &output, &self.status);
-        let heartbeat = frames.iter().any(|f| {
-            MessageKind::from_raw_id(f.id().as_raw()).is_some_and(|(k, _)| k == MessageKind::Status)
-        });
+        let heartbeat = frames.iter().any(is_status);
         TickResult {
             output,
             frames,
@@ -349,9 +382,124 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
     }
 }
 
-/// The detector task's bookkeeping around [`Engine::tick`]: publishing the tick, timing
+/// The board with its detector out of service: no confidence stream, no events, and
+/// nothing received (context, tip state and phase are not read); the heartbeat goes on
+/// at its period with [`FaultFlags::CONFIG_FALLBACK`] set, the reset reason, the board's
+/// own faults (sensors, overruns, bus errors, dropped frames), the sample rate as the
+/// tick rate, no phase, and as the configuration checksum the CRC-32 of the image it
+/// could not run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Fallback {
+    transmitter: Transmitter,
+    tx: TxState,
+    status: Status,
+}
+
+impl Fallback {
+    /// Heartbeats through `transmitter` (its heartbeat period is in samples), reporting
+    /// `params`' reset reason and image CRC-32 and a tick rate of `rate_hz` (the sample
+    /// rate, saturating at 65535).
+    pub fn new(transmitter: Transmitter, params: &EngineParams, rate_hz: u32) -> Fallback {
+        Fallback {
+            transmitter,
+            tx: TxState::new(),
+            status: Status {
+                reset: params.reset,
+                faults: FaultFlags::CONFIG_FALLBACK,
+                tick_rate_hz: u16::try_from(rate_hz).unwrap_or(u16::MAX),
+                config_checksum: params.image_crc,
+                ..Status::default()
+            },
+        }
+    }
+
+    /// The status as last reported.
+    pub fn status(&self) -> &Status {
+        &self.status
+    }
+
+    /// One sample: the board's health into the status, and the heartbeat when due (the
+    /// output is empty: nothing evaluated, nothing decided).
+    pub fn tick(&mut self, sample: &AdcSample, health: &Health) -> TickResult {
+        report_health(&mut self.status, health, sample, self.tx.dropped());
+        let output = Output::default();
+        let frames = self
+            .transmitter
+            .tick(&mut self.tx, sample.tick, &output, &self.status);
+        let heartbeat = frames.iter().any(is_status);
+        TickResult {
+            output,
+            frames,
+            heartbeat,
+        }
+    }
+}
+
+/// What the detector task runs: the engine, or the fallback when the detector could not
+/// be put in service.
+// One instance, in a static, and no heap to box the engine in: the size is the engine's
+// either way.
+#[allow(clippy::large_enum_variant)]
+pub enum Service<'d, T: DetectorTick> {
+    /// The detector runs.
+    Running(Engine<'d, T>),
+    /// The detector is out of service, and why.
+    Fallback(Fallback, FallbackReason),
+}
+
+impl<'d, T: DetectorTick> Service<'d, T> {
+    /// The detector, when it runs.
+    pub fn detector(&self) -> Option<&'d Detector> {
+        match self {
+            Service::Running(e) => Some(e.detector()),
+            Service::Fallback(..) => None,
+        }
+    }
+
+    /// The receiver for the CAN receive task, when the detector runs (the fallback
+    /// reads nothing).
+    pub fn receiver(&self) -> Option<Receiver> {
+        match self {
+            Service::Running(e) => Some(e.receiver()),
+            Service::Fallback(..) => None,
+        }
+    }
+
+    /// Why the detector is out of service; `None` while it runs.
+    pub fn fallback_reason(&self) -> Option<FallbackReason> {
+        match self {
+            Service::Running(_) => None,
+            Service::Fallback(_, reason) => Some(*reason),
+        }
+    }
+
+    /// The status as last reported.
+    pub fn status(&self) -> &Status {
+        match self {
+            Service::Running(e) => e.status(),
+            Service::Fallback(f, _) => f.status(),
+        }
+    }
+
+    /// Samples (ticks) per second.
+    pub fn rate_hz(&self) -> u32 {
+        u32::from(self.status().tick_rate_hz)
+    }
+
+    /// One tick on the newest analog sample ([`Engine::tick`] or [`Fallback::tick`]).
+    pub fn tick(&mut self, sample: &AdcSample, rx: &RxShared, health: &Health) -> TickResult {
+        match self {
+            Service::Running(e) => e.tick(sample, rx, health),
+            Service::Fallback(f, _) => f.tick(sample, health),
+        }
+    }
+}
+
+/// The detector task's bookkeeping around [`Service::tick`]: publishing the tick, timing
 /// it, counting overruns and refused frames, and clearing the latched flags a heartbeat
-/// reported. The board supplies the cycle counter and the frame queue.
+/// reported (once its frames are queued). The board supplies the cycle counter and the
+/// frame queue.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TickRunner {
@@ -376,7 +524,7 @@ impl TickRunner {
     /// queues a frame for the CAN controller and returns `false` when the queue is full.
     pub fn step<T: DetectorTick>(
         &mut self,
-        engine: &mut Engine<'_, T>,
+        service: &mut Service<'_, T>,
         sample: &AdcSample,
         shared: &mut DetectorHandle<'_>,
         cycles: impl Fn() -> u32,
@@ -395,14 +543,17 @@ impl TickRunner {
             latched: shared.latched(),
             sensor_fault: shared.sensor_fault(),
         };
-        let result = engine.tick(sample, shared.rx(), &health);
+        let result = service.tick(sample, shared.rx(), &health);
+        let mut status_refused = false;
         for frame in result.frames.iter() {
             if !send(*frame) {
                 self.queue_full = self.queue_full.saturating_add(1);
                 shared.raise(FaultFlags::TX_DROPPED);
+                status_refused |= is_status(frame);
             }
         }
-        if result.heartbeat {
+        // A heartbeat the queue refused reported nothing: its flags wait for the next.
+        if result.heartbeat && !status_refused {
             shared.clear_reported(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
         let previous_worst = self.timing.worst();
@@ -497,7 +648,7 @@ mod tests {
     /// The embedded detector, loaded as the board loads it.
     fn embedded() -> Box<Detector> {
         let mut d = Box::new(Detector::empty());
-        boot::load_detector(&mut d).unwrap();
+        boot::load_detector(&mut d, boot::DETECTOR_IMAGE).unwrap();
         d
     }
 
@@ -944,7 +1095,7 @@ mod tests {
         use crate::supervise::Task;
         use core::cell::Cell;
         let d = detector();
-        let mut e = engine(&d);
+        let mut e = Service::Running(engine(&d));
         let mut shared = Shared::new();
         let mut h = shared.split();
         let mut runner = TickRunner::new(170_000_000, 5000);
@@ -1003,5 +1154,163 @@ mod tests {
         // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
         assert_eq!(e.status().worst_tick, 2352);
         assert_eq!(runner.timing().overruns(), 251);
+    }
+
+    /// The health page of the heartbeat among `frames`, if any.
+    fn health_flags(frames: &TxFrames) -> Option<FaultFlags> {
+        decode(frames).into_iter().find_map(|m| match m {
+            Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
+            _ => None,
+        })
+    }
+
+    #[test]
+    fn a_frame_dropped_again_during_a_heartbeat_tick_is_reported_by_the_next() {
+        let d = detector();
+        let mut e = Service::Running(engine(&d));
+        let mut shared = Shared::new();
+        let mut h = shared.split();
+        let mut runner = TickRunner::new(170_000_000, 5000);
+        // Ticks well within budget.
+        let cycles = || 0;
+        runner.step(
+            &mut e,
+            &sample(0, 0.0, 0.0),
+            &mut h.detector,
+            cycles,
+            |_| true,
+        );
+        // A frame lost before the next heartbeat (at tick 250) ...
+        h.can_tx.frame_lost();
+        for t in 1..250 {
+            runner.step(
+                &mut e,
+                &sample(t, 0.0, 0.0),
+                &mut h.detector,
+                cycles,
+                |_| true,
+            );
+        }
+        // ... is reported by it; while that heartbeat is being queued, the transmit task
+        // loses another frame: the same flag, raised between the read and the clear.
+        let r = runner.step(
+            &mut e,
+            &sample(250, 0.0, 0.0),
+            &mut h.detector,
+            cycles,
+            |_| {
+                h.can_tx.frame_lost();
+                true
+            },
+        );
+        assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::TX_DROPPED)));
+        // The next heartbeat reports the second loss, and the one after has nothing new.
+        let mut reported = Vec::new();
+        for t in 251..=750 {
+            let r = runner.step(
+                &mut e,
+                &sample(t, 0.0, 0.0),
+                &mut h.detector,
+                cycles,
+                |_| true,
+            );
+            reported.extend(health_flags(&r.frames));
+        }
+        assert_eq!(reported.len(), 2);
+        assert!(reported[0].contains(FaultFlags::TX_DROPPED));
+        assert!(!reported[1].contains(FaultFlags::TX_DROPPED));
+    }
+
+    #[test]
+    fn a_heartbeat_the_queue_refused_reported_nothing() {
+        let d = detector();
+        let mut e = Service::Running(engine(&d));
+        let mut shared = Shared::new();
+        let mut h = shared.split();
+        let mut runner = TickRunner::new(170_000_000, 5000);
+        let cycles = || 0;
+        h.bus.bus_error();
+        // The first tick's heartbeat reports the bus error, but the queue refuses the
+        // status frames.
+        let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &mut h.detector, cycles, |f| {
+            !is_status(&f)
+        });
+        assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::BUS_ERROR)));
+        let mut reported = Vec::new();
+        for t in 1..=250 {
+            let r = runner.step(
+                &mut e,
+                &sample(t, 0.0, 0.0),
+                &mut h.detector,
+                cycles,
+                |_| true,
+            );
+            reported.extend(health_flags(&r.frames));
+        }
+        // Reported again at the next heartbeat, with the refused frames' own flag.
+        assert_eq!(reported.len(), 1);
+        assert!(reported[0].contains(FaultFlags::BUS_ERROR | FaultFlags::TX_DROPPED));
+        assert_eq!(h.detector.latched(), FaultFlags(0));
+    }
+
+    #[test]
+    fn the_fallback_sends_heartbeats_only_with_its_flag_and_the_boards_faults() {
+        let transmitter = Transmitter::with_defaults(node(), 5000).unwrap();
+        let reason = FallbackReason::Image(ImageError::Magic);
+        let mut service: Service<'_, Detector> =
+            Service::Fallback(Fallback::new(transmitter, &params(), 5000), reason);
+        assert!(service.detector().is_none() && service.receiver().is_none());
+        assert_eq!(service.fallback_reason(), Some(reason));
+        assert_eq!(service.rate_hz(), 5000);
+        // The controller commands a phase: nothing is read.
+        let shared = RxShared::new();
+        let receiver = Receiver::new(node(), 2, 100, 500).unwrap();
+        let command = phase(0, 1, 7);
+        shared
+            .with(|rx| receiver.receive(rx, 0, command.id().into(), command.data()))
+            .expect("accepted");
+        let mut s = sample(0, -1.0, 50.0);
+        s.faults = ChannelSet::from_bits(0b0100);
+        let health = Health {
+            latched: FaultFlags::OVERRUN,
+            ..Health::default()
+        };
+        let mut pages = Vec::new();
+        for t in 0..=500 {
+            s.tick = t;
+            let r = service.tick(&s, &shared, &health);
+            assert_eq!(r.output, Output::default());
+            assert_eq!(r.heartbeat, t % 250 == 0);
+            pages.extend(decode(&r.frames));
+        }
+        assert_eq!(
+            pages.len(),
+            6,
+            "two status pages per heartbeat, nothing else"
+        );
+        assert!(
+            pages.iter().all(|m| matches!(m, Message::Status(_))),
+            "{pages:?}"
+        );
+        assert_eq!(
+            pages[0],
+            Message::Status(StatusPage::Health {
+                reset: ResetReason::PowerOn,
+                faults: FaultFlags::CONFIG_FALLBACK
+                    | FaultFlags::OVERRUN
+                    | FaultFlags::SENSOR_FAULT,
+                uptime: 0,
+                phase: None,
+                phase_seq: 0,
+            })
+        );
+        assert!(matches!(
+            pages[1],
+            Message::Status(StatusPage::Timing {
+                tick_rate_hz: 5000,
+                ..
+            })
+        ));
+        assert_eq!(service.status().config_checksum, 0xDEAD_BEEF);
     }
 }

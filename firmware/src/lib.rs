@@ -12,6 +12,7 @@ pub mod rail;
 pub mod reset;
 pub mod sampling;
 pub mod shared;
+pub mod stuck;
 pub mod supervise;
 pub mod timing;
 pub mod tmp117;

@@ -4,8 +4,9 @@
 //! the [`Shared`] state (what it writes, it owns):
 //! - `sampler_task`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
 //!   delivers them a block at a time; calibrated samples go to the detector's queue;
-//! - `detector_task`: one [`Engine::tick`] per sample, timed with the DWT cycle counter;
-//!   its frames go to the CAN transmit queue;
+//! - `detector_task`: one [`Service::tick`] per sample (the engine, or the fallback when
+//!   the embedded detector cannot run), timed with the DWT cycle counter; its frames go
+//!   to the CAN transmit queue;
 //! - `temperature`: the TMP117 over I2C2, four times a second; publishes the temperature;
 //! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
 //! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
@@ -22,7 +23,7 @@ use core::num::{NonZeroU8, NonZeroU16};
 
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
-use defmt::{info, warn};
+use defmt::{error, info, warn};
 use embassy_executor::{Executor, Spawner};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, CanTx, Properties};
@@ -39,9 +40,9 @@ use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
 use detector_core::Detector;
-use fingertip_can::{CanFrame, Receiver};
+use fingertip_can::{CanFrame, Receiver, ResetReason};
 use firmware::boot::{self, ApproachTick};
-use firmware::engine::{Engine, EngineParams, TickRunner};
+use firmware::engine::{Service, TickRunner};
 use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
 use firmware::shared::{
     BusHandle, CanRxHandle, CanTxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
@@ -51,7 +52,7 @@ use firmware::supervise::{BusAction, BusSupervisor, Task};
 use firmware::timing::budget_cycles;
 use firmware::tmp117::{self, SensorHealth, Tmp117};
 use firmware::wiring::CORE_CLOCK_HZ;
-use firmware::{calib, can_timing, checksum, reset};
+use firmware::{calib, can_timing, reset};
 
 bind_interrupts!(struct Irqs {
     DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
@@ -76,7 +77,7 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
 static DETECTOR: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
 static SHARED: StaticCell<Shared> = StaticCell::new();
-static ENGINE: StaticCell<Engine<'static, ApproachTick>> = StaticCell::new();
+static SERVICE: StaticCell<Service<'static, ApproachTick>> = StaticCell::new();
 static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// IWDG period: four missed 50 ms rounds of the watchdog task.
@@ -143,10 +144,11 @@ macro_rules! spawn {
 
 /// Everything the tasks get, set up before the executor starts.
 struct Board {
-    engine: &'static mut Engine<'static, ApproachTick>,
+    service: &'static mut Service<'static, ApproachTick>,
     handles: Handles<'static>,
     rate_hz: u32,
-    receiver: Receiver,
+    /// `None` in the fallback, which reads nothing: the receive task is not started.
+    receiver: Option<Receiver>,
     adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
     sampler: Sampler,
@@ -174,10 +176,12 @@ fn main() -> ! {
     } = b.handles;
     let executor = EXECUTOR.init(Executor::new());
     executor.run(move |spawner: Spawner| {
-        spawn!(spawner, detector_task(b.engine, detector, b.rate_hz));
+        spawn!(spawner, detector_task(b.service, detector, b.rate_hz));
         spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, sampler));
         spawn!(spawner, temperature(b.sensor, sensor_handle));
-        spawn!(spawner, can_rx(b.can_rx, b.receiver, can_rx_handle));
+        if let Some(receiver) = b.receiver {
+            spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
+        }
         spawn!(spawner, can_tx(b.can_tx, can_tx_handle));
         spawn!(spawner, can_supervisor(b.can_properties, bus));
         spawn!(spawner, watchdog_task(b.watchdog, watchdog));
@@ -208,23 +212,18 @@ fn setup() -> Board {
     core.DCB.enable_trace();
     core.DWT.enable_cycle_counter();
 
-    // The detector before anything else is built on the stack: decoding the
-    // configuration and building the detector are the deepest stack of the firmware.
-    let detector = build_detector();
-    let rate = detector.rate_hz();
-    let rate_hz = (rate + 0.5) as u32;
-    // The CRC of the image actually loaded: the generated tick must be the one made for
-    // it, which the engine checks.
-    let image_crc = checksum::crc32(boot::DETECTOR_IMAGE);
-    let params = EngineParams::new(boot::NODE_ID, reset, image_crc);
-    // In a static, not moved into the task: an async task's arguments are stored in
-    // its future twice (as arguments and as locals), and the engine is 3 KiB.
-    let engine: &'static mut Engine<'static, ApproachTick> =
-        match Engine::new(detector, ApproachTick, params) {
-            Ok(e) => ENGINE.init(e),
-            Err(e) => defmt::panic!("engine: {}", e),
-        };
-    let receiver = engine.receiver();
+    // The detector before anything else is built on the stack: loading the image is the
+    // deepest stack of the firmware.
+    let service = build_detector(reset);
+    let rate_hz = service.rate_hz();
+    match service.fallback_reason() {
+        None => info!("detector in service"),
+        Some(reason) => error!(
+            "{}: detector out of service, heartbeats only (FaultConfigFallback)",
+            reason
+        ),
+    }
+    let receiver = service.receiver();
     let handles = SHARED.init_with(Shared::new).split();
 
     // ADC1: the four analog channels, one scan per TIM6 update, circular DMA.
@@ -322,7 +321,7 @@ fn setup() -> Board {
     let watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
 
     Board {
-        engine,
+        service,
         handles,
         rate_hz,
         receiver,
@@ -337,15 +336,15 @@ fn setup() -> Board {
     }
 }
 
-/// The detector, loaded from the embedded image straight into its static.
+/// The detector task's service: the detector loaded from the embedded image straight
+/// into its static and the engine running the generated tick, or the fallback when the
+/// image is rejected or is not the tick's (the CRC of the image actually loaded is
+/// checked). In a static, not moved into the task: an async task's arguments are stored
+/// in its future twice (as arguments and as locals), and the engine is 3 KiB.
 #[inline(never)]
-fn build_detector() -> &'static Detector {
+fn build_detector(reset: ResetReason) -> &'static mut Service<'static, ApproachTick> {
     let detector = DETECTOR.take();
-    match boot::load_detector(detector) {
-        Ok(()) => detector,
-        // Cannot happen: build.rs loaded the same bytes back.
-        Err(e) => defmt::panic!("the embedded detector image was rejected: {}", e),
-    }
+    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, reset))
 }
 
 /// Reads the ADC's DMA ring a block at a time and hands it to the lib's [`Sampler`].
@@ -368,6 +367,7 @@ async fn sampler_task(
                 });
                 shared.set_lost_samples(sampler.clock.lost());
                 shared.set_rail_episodes(sampler.front_end.rail_episodes());
+                shared.set_stuck_episodes(sampler.front_end.stuck_episodes());
                 shared.check_in();
             }
             Err(_) => {
@@ -379,19 +379,20 @@ async fn sampler_task(
     }
 }
 
-/// One engine tick per sample, timed with the DWT cycle counter; frames to the CAN queue.
+/// One service tick per sample (the engine, or the fallback's heartbeat), timed with the
+/// DWT cycle counter; frames to the CAN queue.
 #[embassy_executor::task]
 async fn detector_task(
-    engine: &'static mut Engine<'static, ApproachTick>,
+    service: &'static mut Service<'static, ApproachTick>,
     mut shared: DetectorHandle<'static>,
     rate_hz: u32,
 ) {
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
     let mut last_masks = (0u8, 0u8);
-    let detector = engine.detector();
+    let detector = service.detector();
     loop {
         let sample = SAMPLES.receive().await;
-        let result = runner.step(engine, &sample, &mut shared, DWT::cycle_count, |f| {
+        let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |f| {
             TX_FRAMES.try_send(f).is_ok()
         });
 
@@ -399,8 +400,7 @@ async fn detector_task(
         let out = &result.output;
         for d in out.decisions.iter() {
             let name = detector
-                .events()
-                .get(usize::from(d.event.0))
+                .and_then(|det| det.events().get(usize::from(d.event.0)))
                 .map_or("?", |n| n.as_str());
             info!(
                 "{=str} {=str} at tick {=u32} (onset {=u32}), confidence {=u16}/32768",

@@ -39,7 +39,9 @@ impl RailLimits {
         }
     }
 
-    fn at_rail(&self, counts: u16) -> bool {
+    /// Whether a reading of `counts` is at a rail.
+    #[inline]
+    pub fn at_rail(&self, counts: u16) -> bool {
         counts <= self.low || counts >= self.high
     }
 }

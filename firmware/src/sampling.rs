@@ -8,12 +8,16 @@
 //! instants. When scans are lost (the DMA overwrote a half the task had not read yet),
 //! the count is resynchronized from the system clock, which runs from the same crystal,
 //! and the gap is counted as lost samples.
+//!
+//! Each scan goes through the front end: calibration, the rail watch ([`crate::rail`])
+//! and the stuck-value watch ([`crate::stuck`]); a channel either watch flags is faulty.
 
 use detector_core::{Signal, Tick};
 
 use crate::calib::{ActiveCalibration, Calibration};
 use crate::channel_set::ChannelSet;
 use crate::rail::{RailLimits, RailMonitor};
+use crate::stuck::{StuckLimits, StuckMonitor};
 use crate::wiring::ADC_CHANNELS;
 
 /// Analog channels per scan.
@@ -113,11 +117,13 @@ pub struct AdcSample {
     pub tick: Tick,
     /// Calibrated values, in [`ADC_CHANNELS`] order and units.
     pub values: [Signal; SCAN_LEN],
-    /// Channels currently stuck at a rail, by their place in [`ADC_CHANNELS`].
+    /// Channels currently faulty (stuck at a rail or frozen mid-scale), by their place in
+    /// [`ADC_CHANNELS`].
     pub faults: ChannelSet,
 }
 
-/// The per-channel processing of each scan: calibration and the rail watch.
+/// The per-channel processing of each scan: calibration, the rail watch and the
+/// stuck-value watch.
 #[derive(Clone, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FrontEnd {
@@ -125,17 +131,21 @@ pub struct FrontEnd {
     active: [ActiveCalibration; SCAN_LEN],
     limits: RailLimits,
     rails: [RailMonitor; SCAN_LEN],
+    stuck_limits: StuckLimits,
+    stuck: [StuckMonitor; SCAN_LEN],
 }
 
 impl FrontEnd {
     /// A front end with these calibrations, no temperature yet, rail limits for
-    /// `rate_hz`.
+    /// `rate_hz`, the default stuck-value window ([`StuckLimits::DEFAULT`]).
     pub fn new(calibration: [Calibration; SCAN_LEN], rate_hz: u32) -> FrontEnd {
         FrontEnd {
             calibration,
             active: calibration.map(|c| c.at(None)),
             limits: RailLimits::for_rate(rate_hz),
             rails: [RailMonitor::new(); SCAN_LEN],
+            stuck_limits: StuckLimits::DEFAULT,
+            stuck: [StuckMonitor::new(); SCAN_LEN],
         }
     }
 
@@ -158,13 +168,16 @@ impl FrontEnd {
         };
         for (i, &counts) in raw.iter().enumerate() {
             // Indices are 0..SCAN_LEN on arrays of SCAN_LEN: the compiler drops the checks.
-            if let (Some(v), Some(a), Some(r)) = (
+            if let (Some(v), Some(a), Some(r), Some(s)) = (
                 sample.values.get_mut(i),
                 self.active.get(i),
                 self.rails.get_mut(i),
+                self.stuck.get_mut(i),
             ) {
                 *v = a.apply(counts);
-                if r.update(&self.limits, counts) {
+                let at_rail = r.update(&self.limits, counts);
+                let frozen = s.update(&self.stuck_limits, &self.limits, counts);
+                if at_rail || frozen {
                     sample.faults.insert(i);
                 }
             }
@@ -177,6 +190,13 @@ impl FrontEnd {
         self.rails
             .iter()
             .fold(0u32, |n, r| n.saturating_add(r.episodes()))
+    }
+
+    /// Stuck-value episodes since boot, all channels together (saturating).
+    pub fn stuck_episodes(&self) -> u32 {
+        self.stuck
+            .iter()
+            .fold(0u32, |n, s| n.saturating_add(s.episodes()))
     }
 }
 
@@ -300,6 +320,39 @@ mod tests {
         }
         assert_eq!(last.faults, ChannelSet::from_bits(0b1000));
         assert_eq!(fe.rail_episodes(), 1);
+        assert_eq!(fe.stuck_episodes(), 0, "a rail is the rail watch's alone");
+    }
+
+    #[test]
+    fn a_channel_frozen_mid_scale_is_faulty_until_it_moves() {
+        let mut fe = FrontEnd::new(NOMINAL, 5000);
+        // force_y frozen at 2100 counts, the others live (a count of noise).
+        let scan = |t: u32, y: u16| {
+            let n = (t % 3) as u16;
+            [2047 + n, y, 2048 + n, 2049 - n]
+        };
+        let mut faulty_from = None;
+        for t in 0..1200 {
+            let s = fe.process(t, &scan(t, 2100));
+            if faulty_from.is_none() && !s.faults.is_empty() {
+                faulty_from = Some(t);
+                assert_eq!(s.faults, ChannelSet::from_bits(0b0010));
+            }
+        }
+        assert_eq!(faulty_from, Some(999));
+        assert_eq!((fe.stuck_episodes(), fe.rail_episodes()), (1, 0));
+        // It moves again: healthy after eight changes.
+        let mut faults = Vec::new();
+        for t in 1201..1211 {
+            faults.push(fe.process(t, &scan(t, 2100 + (t % 2) as u16)).faults);
+        }
+        assert!(
+            faults[..7]
+                .iter()
+                .all(|f| *f == ChannelSet::from_bits(0b0010))
+        );
+        assert!(faults[7..].iter().all(|f| f.is_empty()));
+        assert_eq!(fe.stuck_episodes(), 1);
     }
 
     #[test]

@@ -7,8 +7,8 @@
 //!
 //! | handle | writes | reads |
 //! |---|---|---|
-//! | [`SamplerHandle`] | its counters (lost samples, ADC overruns, rail episodes), the overrun flag, its check-in | the temperature |
-//! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags and their clearing, its check-in | every counter, the latched flags, the sensor fault |
+//! | [`SamplerHandle`] | its counters (lost samples, ADC overruns, rail and stuck-value episodes), the overrun flag, its check-in | the temperature |
+//! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
 //! | [`TemperatureHandle`] | the temperature ([`Watch`]), its counters (sensor errors, timeouts) | — |
 //! | [`CanRxHandle`] | its counters (frames, protocol errors) | the detector's tick |
 //! | [`CanTxHandle`] | its counter (frames lost), the frame-dropped flag | — |
@@ -21,6 +21,12 @@
 //! CAN receive task and read-modified by the detector task once per tick, under a
 //! critical-section mutex held only for the few instructions of the receiver's
 //! `receive` / `poll` calls.
+//!
+//! Latched flags are handed over, not read and cleared in two steps: the detector task
+//! takes them all at once (an atomic swap) into its handle, where they wait until a
+//! heartbeat has reported them. A flag raised after the take, even one already waiting
+//! in the handle, stays latched in the shared state for the next heartbeat, whatever
+//! the interleaving.
 
 use core::cell::RefCell;
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
@@ -38,8 +44,9 @@ use crate::tmp117::SensorHealth;
 /// The mutex flavour shared between tasks (and, for the HAL, interrupts).
 pub type RawMutex = CriticalSectionRawMutex;
 
-/// Fault flags raised by any task and reported, then cleared, by the next heartbeat
-/// (the flags that mean "since the last heartbeat": overrun, bus error, frame dropped).
+/// Fault flags raised by any task for the next heartbeat (the flags that mean "since the
+/// last heartbeat": overrun, bus error, frame dropped), until the detector task takes
+/// them.
 #[derive(Debug, Default)]
 struct Latch(AtomicU8);
 
@@ -52,13 +59,10 @@ impl Latch {
         self.0.fetch_or(flags.0, Ordering::Relaxed);
     }
 
-    fn peek(&self) -> FaultFlags {
-        FaultFlags(self.0.load(Ordering::Relaxed))
-    }
-
-    /// Clears `reported` (and only those: a flag raised since the peek stays).
-    fn clear(&self, reported: FaultFlags) {
-        self.0.fetch_and(!reported.0, Ordering::Relaxed);
+    /// Every flag raised since the last take, cleared in the same atomic step: a raise
+    /// lands either in this take or in the next.
+    fn take(&self) -> FaultFlags {
+        FaultFlags(self.0.swap(0, Ordering::Relaxed))
     }
 }
 
@@ -101,6 +105,8 @@ pub struct Counters {
     pub adc_overruns: Counter,
     /// Stuck-at-rail episodes, all channels (sampler).
     pub rail_episodes: Counter,
+    /// Stuck-value episodes (a channel frozen mid-scale), all channels (sampler).
+    pub stuck_episodes: Counter,
     /// Failed temperature readings (sensor task).
     pub sensor_errors: Counter,
     /// Of those, timeouts (sensor task).
@@ -133,6 +139,7 @@ impl Counters {
             lost_samples: Counter::new(),
             adc_overruns: Counter::new(),
             rail_episodes: Counter::new(),
+            stuck_episodes: Counter::new(),
             sensor_errors: Counter::new(),
             sensor_timeouts: Counter::new(),
             bus_off: Counter::new(),
@@ -238,7 +245,10 @@ impl Shared {
         let s: &Shared = self;
         Handles {
             sampler: SamplerHandle(s),
-            detector: DetectorHandle(s),
+            detector: DetectorHandle {
+                shared: s,
+                unreported: FaultFlags(0),
+            },
             temperature: TemperatureHandle(s),
             can_rx: CanRxHandle(s),
             can_tx: CanTxHandle(s),
@@ -268,6 +278,11 @@ impl SamplerHandle<'_> {
         self.0.counters.rail_episodes.set(n);
     }
 
+    /// Publishes the stuck-value episodes so far (the front end's count).
+    pub fn set_stuck_episodes(&mut self, n: u32) {
+        self.0.counters.stuck_episodes.set(n);
+    }
+
     /// The DMA overran the reader: counted, and latched for the next heartbeat.
     pub fn adc_overrun(&mut self) {
         self.0.counters.adc_overruns.add(1);
@@ -280,49 +295,62 @@ impl SamplerHandle<'_> {
     }
 }
 
-/// The detector task's handle.
-pub struct DetectorHandle<'a>(&'a Shared);
+/// The detector task's handle. It holds the latched flags it has taken and no heartbeat
+/// has reported yet.
+pub struct DetectorHandle<'a> {
+    shared: &'a Shared,
+    unreported: FaultFlags,
+}
 
 impl<'a> DetectorHandle<'a> {
     /// Publishes the tick the detector is at (the CAN receive task's clock).
     pub fn set_now(&mut self, now: Tick) {
-        self.0.now.store(now, Ordering::Relaxed);
+        self.shared.now.store(now, Ordering::Relaxed);
     }
 
     /// The CAN receive state.
     pub fn rx(&self) -> &'a RxShared {
-        &self.0.rx
+        &self.shared.rx
     }
 
     /// Every counter, read-only.
     pub fn counters(&self) -> &'a Counters {
-        &self.0.counters
+        &self.shared.counters
     }
 
     /// Whether the temperature sensor is faulty (not before its first report).
     pub fn sensor_fault(&self) -> bool {
-        self.0.temperature.try_get().is_some_and(|t| t.sensor_fault)
+        self.shared
+            .temperature
+            .try_get()
+            .is_some_and(|t| t.sensor_fault)
     }
 
-    /// The flags latched and not yet reported.
-    pub fn latched(&self) -> FaultFlags {
-        self.0.latched.peek()
+    /// The flags latched and not yet reported, for the heartbeat about to be built:
+    /// takes the flags raised since the last call out of the shared state and adds them
+    /// to those still unreported. Call it once per heartbeat built, and
+    /// [`clear_reported`](DetectorHandle::clear_reported) with what that heartbeat
+    /// reported before calling it again.
+    pub fn latched(&mut self) -> FaultFlags {
+        self.unreported = self.unreported | self.shared.latched.take();
+        self.unreported
     }
 
     /// Latches `flags` for the next heartbeat.
     pub fn raise(&self, flags: FaultFlags) {
-        self.0.latched.raise(flags);
+        self.shared.latched.raise(flags);
     }
 
-    /// A heartbeat reported `flags`: clears them (and only them: a flag raised since it
-    /// was built stays for the next).
+    /// A heartbeat reported `flags` (as [`latched`](DetectorHandle::latched) returned
+    /// them): they are no longer unreported. A flag raised since that call is still in
+    /// the shared state, untouched, for the next heartbeat.
     pub fn clear_reported(&mut self, flags: FaultFlags) {
-        self.0.latched.clear(flags);
+        self.unreported.0 &= !flags.0;
     }
 
     /// The detector is alive.
     pub fn check_in(&self) {
-        self.0.liveness.check_in(Task::Detector);
+        self.shared.liveness.check_in(Task::Detector);
     }
 }
 
@@ -425,10 +453,30 @@ mod tests {
         h.bus.bus_error();
         h.detector.clear_reported(seen);
         assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
+        h.detector.clear_reported(FaultFlags::BUS_ERROR);
         h.can_tx.frame_lost();
-        assert!(h.detector.latched().contains(FaultFlags::TX_DROPPED));
+        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
+        // Not reported yet (no heartbeat cleared it): still there at the next look.
+        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
         let c = h.detector.counters();
         assert_eq!((c.tx_lost.get(), c.adc_overruns.get()), (1, 1));
+    }
+
+    #[test]
+    fn a_flag_raised_again_between_the_read_and_the_clear_is_kept() {
+        let mut s = Shared::new();
+        let mut h = s.split();
+        h.can_tx.frame_lost();
+        // A heartbeat is built with the frame-dropped flag ...
+        let reported = h.detector.latched();
+        assert_eq!(reported, FaultFlags::TX_DROPPED);
+        // ... another frame is lost before the clear: the same flag, raised again ...
+        h.can_tx.frame_lost();
+        h.detector.clear_reported(reported);
+        // ... and the next heartbeat reports it.
+        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
+        h.detector.clear_reported(FaultFlags::TX_DROPPED);
+        assert_eq!(h.detector.latched(), FaultFlags(0));
     }
 
     #[test]
@@ -447,6 +495,9 @@ mod tests {
         assert_eq!(c.rx_protocol_errors.get(), 2);
         assert_eq!(c.bus_errors(), u32::MAX, "the sum saturates");
         assert_eq!(c.rail_episodes.get(), 0);
+        h.sampler.set_stuck_episodes(2);
+        h.sampler.set_rail_episodes(1);
+        assert_eq!((c.stuck_episodes.get(), c.rail_episodes.get()), (2, 1));
     }
 
     #[test]

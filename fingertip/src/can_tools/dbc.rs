@@ -333,7 +333,7 @@ pub fn messages() -> Vec<MessageDef> {
         "A tick overran its period since the last heartbeat",
         "CAN controller error-passive or bus-off since the last heartbeat",
         "A frame could not be queued since the last heartbeat",
-        "Stored configuration rejected: the built-in default runs",
+        "Detector image rejected: detector out of service, status heartbeats only",
         "A sensor channel is flagged faulty",
     ];
     for (i, (name, comment)) in FaultFlags::NAMES.iter().zip(flag_comments).enumerate() {
