@@ -1164,6 +1164,22 @@ mod tests {
         })
     }
 
+    /// Runs the ticks `ticks` with quiet samples and every frame sent; the health flags of
+    /// the heartbeats among them, in order.
+    fn quiet_heartbeats(
+        runner: &mut TickRunner,
+        service: &mut Service<'_, Detector>,
+        handle: &mut DetectorHandle<'_>,
+        ticks: core::ops::RangeInclusive<Tick>,
+    ) -> Vec<FaultFlags> {
+        ticks
+            .filter_map(|t| {
+                let r = runner.step(service, &sample(t, 0.0, 0.0), handle, || 0, |_| true);
+                health_flags(&r.frames)
+            })
+            .collect()
+    }
+
     #[test]
     fn a_frame_dropped_again_during_a_heartbeat_tick_is_reported_by_the_next() {
         let d = detector();
@@ -1205,17 +1221,7 @@ mod tests {
         );
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::TX_DROPPED)));
         // The next heartbeat reports the second loss, and the one after has nothing new.
-        let mut reported = Vec::new();
-        for t in 251..=750 {
-            let r = runner.step(
-                &mut e,
-                &sample(t, 0.0, 0.0),
-                &mut h.detector,
-                cycles,
-                |_| true,
-            );
-            reported.extend(health_flags(&r.frames));
-        }
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 251..=750);
         assert_eq!(reported.len(), 2);
         assert!(reported[0].contains(FaultFlags::TX_DROPPED));
         assert!(!reported[1].contains(FaultFlags::TX_DROPPED));
@@ -1236,17 +1242,7 @@ mod tests {
             !is_status(&f)
         });
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::BUS_ERROR)));
-        let mut reported = Vec::new();
-        for t in 1..=250 {
-            let r = runner.step(
-                &mut e,
-                &sample(t, 0.0, 0.0),
-                &mut h.detector,
-                cycles,
-                |_| true,
-            );
-            reported.extend(health_flags(&r.frames));
-        }
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 1..=250);
         // Reported again at the next heartbeat, with the refused frames' own flag.
         assert_eq!(reported.len(), 1);
         assert!(reported[0].contains(FaultFlags::BUS_ERROR | FaultFlags::TX_DROPPED));
