@@ -174,15 +174,26 @@ fn level(
             },
         );
     }
-    let ticks = spec.dwell_ms * rate_hz / 1000.0;
-    if !(ticks.is_finite() && (0.0..=65535.0).contains(&ticks)) {
-        return err(item, Problem::Dwell(spec.dwell_ms));
-    }
-    // `on` in (0, 1], `off` at most `on` and a dwell of at least one tick: always a level.
-    LevelParams::new(on, off, ((ticks + 0.5) as u16).max(1)).ok_or(ConfigError {
+    let dwell = ticks_of(&item, "dwell_ms", spec.dwell_ms, rate_hz)?;
+    let hold = ticks_of(&item, "hold_ms", spec.hold_ms, rate_hz)?;
+    // `on` in (0, 1], `off` at most `on`, a dwell and a hold of at least one tick: always a
+    // level.
+    LevelParams::new(on, off, dwell, hold).ok_or(ConfigError {
         item,
-        problem: Problem::Dwell(spec.dwell_ms),
+        problem: Problem::Time {
+            param: "dwell_ms",
+            value: spec.dwell_ms,
+        },
     })
+}
+
+/// A level's time `ms` as ticks at `rate_hz`: max(1, round(ms · rate / 1000)).
+fn ticks_of(item: &Item, param: &'static str, ms: f32, rate_hz: f32) -> Result<u16, ConfigError> {
+    let ticks = ms * rate_hz / 1000.0;
+    if !(ticks.is_finite() && (0.0..=65535.0).contains(&ticks)) {
+        return err(item.clone(), Problem::Time { param, value: ms });
+    }
+    Ok(((ticks + 0.5) as u16).max(1))
 }
 
 /// Validates a configuration and compiles it. Every rule is checked; the first violation

@@ -87,19 +87,25 @@ pub struct SensorTerm {
     pub cdf: CdfSpec,
 }
 
-/// A decision level with hysteresis and a minimum dwell.
+/// A decision level with hysteresis, a minimum dwell and a hold.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LevelSpec {
     /// The level is raised once the confidence has stayed at or above `on` for the dwell.
     pub on: f32,
-    /// ... and cleared when the confidence falls below `off` (≤ `on`).
+    /// ... and cleared once the confidence has stayed below `off` (≤ `on`) for the hold.
     pub off: f32,
     /// Minimum time at or above `on` before the level is raised, in ms: the level is
     /// raised on the n-th consecutive tick at or above `on`, n = max(1, round(dwell_ms ·
     /// rate / 1000)); 0 (the default) raises it on the first such tick.
     #[serde(default)]
     pub dwell_ms: f32,
+    /// Minimum time below `off` before a raised level is cleared, in ms, rounded to ticks as
+    /// the dwell; 0 (the default) clears it on the first such tick. A confidence that dips
+    /// below `off` for less than the hold and comes back keeps the level up: one physical
+    /// event, one rise of the level.
+    #[serde(default)]
+    pub hold_ms: f32,
 }
 
 /// An event (eq. 14): Ψ = Π context confidences × Σ weight × sensor confidence.
@@ -218,8 +224,13 @@ pub enum Problem {
         /// What it must satisfy.
         rule: &'static str,
     },
-    /// A dwell is negative, not finite, or longer than 65 535 ticks.
-    Dwell(f32),
+    /// A level's dwell or hold time is negative, not finite, or longer than 65 535 ticks.
+    Time {
+        /// `dwell_ms` or `hold_ms`.
+        param: &'static str,
+        /// Its value.
+        value: f32,
+    },
     /// A channel's scale is not a positive, finite number.
     Scale(f32),
     /// The term would be one distinct (feature, CDF) pair more than the detector holds
@@ -276,9 +287,9 @@ impl core::fmt::Display for Problem {
                 "the events' terms judge more than {n} distinct (feature, CDF) pairs"
             ),
             Problem::Image(e) => write!(f, "the compiled image does not load: {e}"),
-            Problem::Dwell(d) => write!(
+            Problem::Time { param, value } => write!(
                 f,
-                "dwell_ms = {d} must be a finite, non-negative time of at most 65535 ticks"
+                "{param} = {value} must be a finite, non-negative time of at most 65535 ticks"
             ),
         }
     }

@@ -133,31 +133,42 @@ impl Output {
     }
 }
 
-/// A decision level: up at `on` (Q15) after `dwell` ticks in a row, down below `off`.
+/// A decision level: up at `on` (Q15) after `dwell` ticks in a row, down below `off` after
+/// `hold` ticks in a row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LevelParams {
     pub(crate) on: u16,
     pub(crate) off: u16,
     pub(crate) dwell: u16,
+    pub(crate) hold: u16,
 }
 
 impl LevelParams {
     /// A level raised once the confidence has stayed at or above `on` (Q15, in (0, 1]) for
-    /// `dwell` ticks in a row (at least 1) and lowered when it falls below `off` (at most
-    /// `on`); `None` outside those ranges.
-    pub const fn new(on: u16, off: u16, dwell: u16) -> Option<LevelParams> {
-        if on == 0 || on > Confidence::ONE.to_bits() || off > on || dwell == 0 {
+    /// `dwell` ticks in a row (at least 1) and lowered once it has stayed below `off` (at
+    /// most `on`) for `hold` ticks in a row (at least 1); `None` outside those ranges.
+    ///
+    /// The hold makes one physical event one rise of the level: a confidence that dips
+    /// below `off` for less than `hold` ticks and comes back keeps the level up instead of
+    /// raising it a second time.
+    pub const fn new(on: u16, off: u16, dwell: u16, hold: u16) -> Option<LevelParams> {
+        if on == 0 || on > Confidence::ONE.to_bits() || off > on || dwell == 0 || hold == 0 {
             None
         } else {
-            Some(LevelParams { on, off, dwell })
+            Some(LevelParams {
+                on,
+                off,
+                dwell,
+                hold,
+            })
         }
     }
 
     /// [`LevelParams::new`] for generated code's constants: values it refuses fail the
     /// build of the generated code.
     #[doc(hidden)]
-    pub const fn checked(on: u16, off: u16, dwell: u16) -> LevelParams {
-        match LevelParams::new(on, off, dwell) {
+    pub const fn checked(on: u16, off: u16, dwell: u16, hold: u16) -> LevelParams {
+        match LevelParams::new(on, off, dwell, hold) {
             Some(l) => l,
             None => panic!("decision level"),
         }
@@ -168,7 +179,7 @@ impl LevelParams {
         self.on
     }
 
-    /// The confidence (Q15) below which a raised level falls.
+    /// The confidence (Q15) below which a raised level counts ticks towards falling.
     pub const fn off(&self) -> u16 {
         self.off
     }
@@ -178,14 +189,19 @@ impl LevelParams {
         self.dwell
     }
 
+    /// Ticks in a row below `off` before a raised level falls.
+    pub const fn hold(&self) -> u16 {
+        self.hold
+    }
+
     /// This level as a Rust expression for generated code.
     pub fn rust(&self) -> Rust<'_, LevelParams> {
         Rust(self)
     }
 
     pub(crate) fn read_image(r: &mut Reader<'_>) -> Result<LevelParams, ImageError> {
-        let (on, off, dwell) = (r.u16()?, r.u16()?, r.u16()?);
-        LevelParams::new(on, off, dwell).ok_or(ImageError::Invalid("decision level"))
+        let (on, off, dwell, hold) = (r.u16()?, r.u16()?, r.u16()?, r.u16()?);
+        LevelParams::new(on, off, dwell, hold).ok_or(ImageError::Invalid("decision level"))
     }
 
     /// Appends this level to a detector image.
@@ -193,35 +209,49 @@ impl LevelParams {
         w.u16(self.on);
         w.u16(self.off);
         w.u16(self.dwell);
+        w.u16(self.hold);
     }
 }
 
 impl core::fmt::Display for Rust<'_, LevelParams> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let l = self.0;
-        write!(f, "LevelParams::checked({}, {}, {})", l.on, l.off, l.dwell)
+        write!(
+            f,
+            "LevelParams::checked({}, {}, {}, {})",
+            l.on, l.off, l.dwell, l.hold
+        )
     }
 }
 
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct LevelState {
     pub(crate) up: bool,
+    /// Ticks in a row at or above `on` while down, below `off` while up.
     run: u16,
 }
 
 impl LevelState {
     /// One tick of a level at confidence `q` (Q15): up at `on` after `dwell` ticks in a
-    /// row, down below `off`. Returns whether the level was raised at this tick.
+    /// row, down below `off` after `hold` ticks in a row. Returns whether the level was
+    /// raised at this tick.
     #[inline(always)]
     pub(crate) fn step(&mut self, p: &LevelParams, q: u16) -> bool {
         if self.up {
-            if q < p.off {
+            self.run = if q < p.off {
+                self.run.saturating_add(1)
+            } else {
+                0
+            };
+            if self.run >= p.hold {
                 *self = LevelState::default();
             }
             false
         } else if q >= p.on {
             self.run = self.run.saturating_add(1);
-            self.up = self.run >= p.dwell;
+            if self.run >= p.dwell {
+                *self = LevelState { up: true, run: 0 };
+            }
             self.up
         } else {
             self.run = 0;

@@ -813,13 +813,14 @@ impl Tally {
     /// scenario with the command that reproduces them.
     fn print(&self) {
         println!(
-            "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
+            "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
             "scenario",
             "expected",
             "runs",
             "right",
             "wrong",
             "missed",
+            "repeat",
             "med ms",
             "p95 ms",
             "p99 ms",
@@ -827,13 +828,14 @@ impl Tally {
         );
         for r in &self.reports {
             println!(
-                "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
+                "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
                 r.name,
                 r.expected,
                 r.runs,
                 r.correct,
                 r.wrong,
                 r.missed,
+                r.repeated,
                 r.latency_ms.median,
                 r.latency_ms.p95,
                 r.latency_ms.p99,
@@ -859,18 +861,15 @@ impl Tally {
             if *n > SHOWN_FAILURES {
                 continue;
             }
-            let what = match outcome {
-                Outcome::Wrong { event, t_s } => {
-                    format!("{event} confirmed at {:.2} ms", t_s * 1e3)
-                }
-                _ => "missed".to_string(),
-            };
             let duration = if *scenario == Scenario::FreeMotion {
                 format!(" --duration {FREE_RUN_S}")
             } else {
                 String::new()
             };
-            println!("  {:<26} --seed {seed}{duration}: {what}", scenario.name());
+            println!(
+                "  {:<26} --seed {seed}{duration}: {outcome}",
+                scenario.name()
+            );
         }
     }
 }
@@ -955,18 +954,7 @@ fn demo(out: &Path) -> Result<()> {
         let expected = scenario
             .expected()
             .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
-        let verdict = match score::classify(expected, &rec.decisions) {
-            Outcome::Correct { latency_s } => format!(
-                "{} confirmed {:.2} ms after onset",
-                scenario.expected().unwrap_or(""),
-                latency_s * 1e3
-            ),
-            Outcome::QuietAsExpected => "nothing confirmed, as expected".to_string(),
-            Outcome::Missed => "MISSED".to_string(),
-            Outcome::Wrong { event, t_s } => {
-                format!("WRONG: {event} confirmed at {:.2} ms", t_s * 1e3)
-            }
-        };
+        let verdict = score::classify(expected, &rec.decisions);
         println!("{title}: {verdict}");
         for d in &rec.decisions {
             println!("  {}", describe(d, truth.as_ref()));

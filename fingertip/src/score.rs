@@ -21,6 +21,14 @@ pub enum Outcome {
         /// When (s).
         t_s: f64,
     },
+    /// The expected event was confirmed more than once and nothing else was confirmed: a
+    /// controller would see one physical event as several.
+    Repeated {
+        /// How many times.
+        confirmations: usize,
+        /// From the true onset to the first confirmation (s).
+        latency_s: f64,
+    },
     /// An event was expected and nothing was confirmed.
     Missed,
     /// No event expected and none confirmed.
@@ -48,12 +56,40 @@ pub fn classify(expected: Option<(&str, f64)>, decisions: &[DecisionRecord]) -> 
             t_s: d.t_s,
         };
     }
+    let count = confirmations.clone().count();
     match (expected, confirmations.next()) {
         (None, _) => Outcome::QuietAsExpected,
         (Some(_), None) => Outcome::Missed,
-        (Some((_, onset)), Some(d)) => Outcome::Correct {
+        (Some((_, onset)), Some(d)) if count == 1 => Outcome::Correct {
             latency_s: d.t_s - onset,
         },
+        (Some((_, onset)), Some(d)) => Outcome::Repeated {
+            confirmations: count,
+            latency_s: d.t_s - onset,
+        },
+    }
+}
+
+impl core::fmt::Display for Outcome {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Outcome::Correct { latency_s } => {
+                write!(f, "confirmed {:.2} ms after onset", latency_s * 1e3)
+            }
+            Outcome::Repeated {
+                confirmations,
+                latency_s,
+            } => write!(
+                f,
+                "REPEATED: confirmed {confirmations} times, first {:.2} ms after onset",
+                latency_s * 1e3
+            ),
+            Outcome::Wrong { event, t_s } => {
+                write!(f, "WRONG: {event} confirmed at {:.2} ms", t_s * 1e3)
+            }
+            Outcome::Missed => f.write_str("MISSED"),
+            Outcome::QuietAsExpected => f.write_str("nothing confirmed, as expected"),
+        }
     }
 }
 
@@ -106,6 +142,8 @@ pub struct ScenarioReport {
     pub wrong: usize,
     /// Runs that confirmed nothing although an event happened.
     pub missed: usize,
+    /// Runs that confirmed the right event, and nothing else, more than once.
+    pub repeated: usize,
     /// Latency from true onset to confirmation over the correct runs (ms).
     pub latency_ms: Latency,
 }
@@ -132,6 +170,10 @@ impl ScenarioReport {
             missed: outcomes
                 .iter()
                 .filter(|o| matches!(o, Outcome::Missed))
+                .count(),
+            repeated: outcomes
+                .iter()
+                .filter(|o| matches!(o, Outcome::Repeated { .. }))
                 .count(),
             latency_ms: Latency::from_seconds(&latencies),
         }
@@ -202,6 +244,24 @@ mod tests {
             classify(Some(("contact", 0.020)), &[alert]),
             Outcome::Missed
         );
+        // The right event confirmed twice is one physical event reported as two.
+        assert_eq!(
+            classify(
+                Some(("contact", 0.020)),
+                &[confirm("contact", 0.021), confirm("contact", 0.025)]
+            ),
+            Outcome::Repeated {
+                confirmations: 2,
+                latency_s: 0.021 - 0.020
+            }
+        );
+        assert!(
+            !Outcome::Repeated {
+                confirmations: 2,
+                latency_s: 0.0
+            }
+            .is_right()
+        );
         assert_eq!(classify(None, &[]), Outcome::QuietAsExpected);
         assert!(matches!(
             classify(None, &[confirm("contact", 0.05)]),
@@ -229,9 +289,16 @@ mod tests {
                 event: "x".into(),
                 t_s: 0.0,
             },
+            Outcome::Repeated {
+                confirmations: 3,
+                latency_s: 0.002,
+            },
         ];
         let r = ScenarioReport::tally("contact_hard_8", Some("contact"), &outcomes);
-        assert_eq!((r.runs, r.correct, r.wrong, r.missed), (4, 2, 1, 1));
+        assert_eq!(
+            (r.runs, r.correct, r.wrong, r.missed, r.repeated),
+            (5, 2, 1, 1, 1)
+        );
         assert_eq!(r.latency_ms.max, 3.0);
         assert_eq!(
             ScenarioReport::tally("s", None, &[Outcome::QuietAsExpected]).correct,

@@ -103,7 +103,9 @@ fn evaluate_writes_the_documented_report() {
     let scenarios = report["scenarios"].as_array().expect("scenarios");
     assert_eq!(scenarios.len(), 13);
     for s in scenarios {
-        for key in ["name", "expected", "runs", "correct", "wrong", "missed"] {
+        for key in [
+            "name", "expected", "runs", "correct", "wrong", "missed", "repeated",
+        ] {
             assert!(!s[key].is_null(), "{key} missing in {s}");
         }
         for key in ["median", "p95", "p99", "max"] {

@@ -40,7 +40,8 @@
 //!   tick on which the confidence has been at or above `on` for `dwell` consecutive ticks,
 //!   `dwell = max(1, round(dwell_ms · rate_hz / 1000))` (so a dwell of 0 raises it on the
 //!   first tick at or above `on`; the documentation leaves the conversion to ticks open, this
-//!   is the engine's), and lowered when the confidence falls below `off`. A raised
+//!   is the engine's), and lowered at the tick on which the confidence has been below `off`
+//!   for `hold` consecutive ticks (converted the same way from `hold_ms`). A raised
 //!   level reports the confidence, the tick and the onset: the first tick of the current
 //!   run of confidence strictly above `onset_level`. Switching to another phase lowers every
 //!   level and forgets onsets; only the active phase's events are evaluated.
@@ -150,10 +151,9 @@ pub fn low_pass_alpha(rate_hz: f64, cutoff_hz: f64) -> f64 {
     dt / (tau + dt)
 }
 
-/// The number of consecutive ticks at or above `on` a level needs before it is raised:
-/// `max(1, round(dwell_ms · rate_hz / 1000))`.
-pub fn dwell_ticks(dwell_ms: f32, rate_hz: f32) -> u32 {
-    let ticks = (f64::from(dwell_ms) * f64::from(rate_hz) / 1000.0).round();
+/// A level's dwell or hold as consecutive ticks: `max(1, round(ms · rate_hz / 1000))`.
+pub fn level_ticks(ms: f32, rate_hz: f32) -> u32 {
+    let ticks = (f64::from(ms) * f64::from(rate_hz) / 1000.0).round();
     if ticks.is_finite() && ticks >= 1.0 {
         ticks.min(f64::from(u32::MAX)) as u32
     } else {
@@ -201,6 +201,7 @@ struct LevelParams {
     on: f64,
     off: f64,
     dwell: u32,
+    hold: u32,
 }
 
 #[derive(Clone, Debug)]
@@ -252,7 +253,10 @@ impl StageState {
 #[derive(Clone, Copy, Debug, Default)]
 struct LevelState {
     up: bool,
+    /// Consecutive ticks at or above `on`.
     run: u32,
+    /// Consecutive ticks below `off`.
+    below: u32,
 }
 
 /// One event's decision state.
@@ -393,7 +397,8 @@ impl Model {
         let level = |l: &detector_build::LevelSpec| LevelParams {
             on: f64::from(l.on),
             off: f64::from(l.off),
-            dwell: dwell_ticks(l.dwell_ms, config.rate_hz),
+            dwell: level_ticks(l.dwell_ms, config.rate_hz),
+            hold: level_ticks(l.hold_ms, config.rate_hz),
         };
         let mut events = Vec::new();
         for e in &config.events {
@@ -608,7 +613,12 @@ impl Model {
                 } else {
                     0
                 };
-                if l.up && c < p.off {
+                l.below = if c < p.off {
+                    l.below.saturating_add(1)
+                } else {
+                    0
+                };
+                if l.up && l.below >= p.hold {
                     l.up = false;
                 }
                 if !l.up && l.run >= p.dwell {

@@ -163,7 +163,7 @@ fn nan_anywhere() {
         |c| c.events[0].confirm.dwell_ms = nan,
         &["confirm level", "dwell_ms = NaN"],
     );
-    assert!(matches!(e.problem, Problem::Dwell(d) if d.is_nan()));
+    assert!(matches!(e.problem, Problem::Time { param: "dwell_ms", value } if value.is_nan()));
     let e = reject(
         |c| {
             c.features[0].stage = StageSpec::LowPass {

@@ -163,6 +163,57 @@ fn dwell() {
     assert!(outs[5].confirmed & 1 == 0);
 }
 
+/// Confirm with a hold of 3 ms = 3 ticks: a dip below `off` (⅛ < ½) for 1 or 2 ticks keeps
+/// the level up and raises nothing again (one physical event, one confirmation); 3 ticks in
+/// a row below `off` lower it, and the next rise is a second confirmation (the onset stays
+/// at tick 1: the confidence never returns to 0). Without a hold the same script confirms
+/// four times.
+#[test]
+fn hold_keeps_one_event_one_confirmation() {
+    let xs = [0.0, 1.0, 0.25, 1.0, 0.25, 0.25, 1.0, 0.25, 0.25, 0.25, 1.0];
+    for (hold_ms, want, up_at_9) in [
+        (
+            3.0,
+            vec![(1, Level::Confirm, 1), (10, Level::Confirm, 1)],
+            false,
+        ),
+        (
+            2.0,
+            vec![
+                (1, Level::Confirm, 1),
+                (6, Level::Confirm, 1),
+                (10, Level::Confirm, 1),
+            ],
+            false,
+        ),
+        (4.0, vec![(1, Level::Confirm, 1)], true),
+        (
+            0.0,
+            vec![
+                (1, Level::Confirm, 1),
+                (3, Level::Confirm, 1),
+                (6, Level::Confirm, 1),
+                (10, Level::Confirm, 1),
+            ],
+            false,
+        ),
+    ] {
+        let c = detector_config(1.0, false, false, |e| {
+            e.alert = level(0.5, 0.25, 0.0);
+            e.confirm = level(0.75, 0.5, 0.0);
+            e.confirm.hold_ms = hold_ms;
+        });
+        let outs = run(&c, &xs.map(at));
+        let confirms: Vec<_> = raised(&outs)
+            .into_iter()
+            .filter(|r| r.1 == Level::Confirm)
+            .collect();
+        assert_eq!(confirms, want, "hold {hold_ms} ms");
+        assert_eq!(outs[9].confirmed & 1 != 0, up_at_9, "hold {hold_ms} ms");
+        assert!(outs[2].confirmed & 1 != 0 || hold_ms == 0.0);
+    }
+}
+
 /// A dwell of 0 raises at the first tick at or above `on`, like a dwell of one tick.
 #[test]
 fn zero_dwell_raises_on_the_first_tick() {

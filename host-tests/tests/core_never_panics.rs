@@ -162,19 +162,22 @@ fn any_cdf() -> impl Strategy<Value = CdfSpec> {
 /// Alert and confirm levels: mostly in order, now and then anything.
 fn any_levels() -> impl Strategy<Value = (LevelSpec, LevelSpec)> {
     let any_level = || {
-        (any_f32(), any_f32(), any_f32()).prop_map(|(on, off, dwell_ms)| LevelSpec {
-            on,
-            off,
-            dwell_ms,
+        (any_f32(), any_f32(), any_f32(), any_f32()).prop_map(|(on, off, dwell_ms, hold_ms)| {
+            LevelSpec {
+                on,
+                off,
+                dwell_ms,
+                hold_ms,
+            }
         })
     };
     prop_oneof![
         1 => (any_level(), any_level()),
-        20 => (0.05f32..=0.5, 0.0f32..=0.05, 0.5f32..=1.0, 0.0f32..=0.5, 0.0f32..5.0, 0.0f32..5.0)
-            .prop_map(|(a_on, a_off, c_on, c_off, a_dwell, c_dwell)| {
+        20 => (0.05f32..=0.5, 0.0f32..=0.05, 0.5f32..=1.0, 0.0f32..=0.5, proptest::array::uniform4(0.0f32..5.0))
+            .prop_map(|(a_on, a_off, c_on, c_off, [a_dwell, c_dwell, a_hold, c_hold])| {
                 (
-                    LevelSpec { on: a_on, off: a_off, dwell_ms: a_dwell },
-                    LevelSpec { on: c_on, off: c_off, dwell_ms: c_dwell },
+                    LevelSpec { on: a_on, off: a_off, dwell_ms: a_dwell, hold_ms: a_hold },
+                    LevelSpec { on: c_on, off: c_off, dwell_ms: c_dwell, hold_ms: c_hold },
                 )
             }),
     ]

@@ -13,9 +13,14 @@ pub fn name(s: &str) -> String {
     s.to_owned()
 }
 
-/// A level.
+/// A level without hold.
 pub fn level(on: f32, off: f32, dwell_ms: f32) -> LevelSpec {
-    LevelSpec { on, off, dwell_ms }
+    LevelSpec {
+        on,
+        off,
+        dwell_ms,
+        hold_ms: 0.0,
+    }
 }
 
 /// A sensor term.
