@@ -48,7 +48,7 @@ enum Command {
         /// of the nominal Table 1 values.
         #[arg(long)]
         randomize: bool,
-        /// Length of the run in seconds (default: onset + 130 ms for Table 1 runs, 10 s for
+        /// Length of the run in seconds (default: onset + 130 ms for single-event runs, 10 s for
         /// free motion).
         #[arg(long)]
         duration: Option<f64>,
@@ -658,33 +658,33 @@ const MAX_FREE_HOURS: f64 = 100.0;
 /// One randomized run of `evaluate`.
 #[derive(Clone, Copy, Debug)]
 enum Job {
-    /// Run `k` of the Table 1 scenario at `index` in [`Scenario::table1`].
-    Table1 { index: usize, k: usize },
+    /// Run `k` of the scenario at `index` in [`Scenario::single_event`].
+    Single { index: usize, k: usize },
     /// Stretch `k` of event-free motion, [`FREE_RUN_S`] long.
     FreeMotion { k: usize },
 }
 
 impl Job {
-    /// Every job: `runs` of each Table 1 scenario in order, then `free_runs` stretches of
-    /// free motion.
+    /// Every job: `runs` of each single-event scenario in order, then `free_runs` stretches
+    /// of free motion.
     fn all(runs: usize, free_runs: usize) -> Vec<Job> {
-        (0..Scenario::table1().len())
-            .flat_map(|index| (0..runs).map(move |k| Job::Table1 { index, k }))
+        (0..Scenario::single_event().len())
+            .flat_map(|index| (0..runs).map(move |k| Job::Single { index, k }))
             .chain((0..free_runs).map(|k| Job::FreeMotion { k }))
             .collect()
     }
 
     fn scenario(self) -> Scenario {
         match self {
-            Job::Table1 { index, .. } => Scenario::table1()[index],
+            Job::Single { index, .. } => Scenario::single_event()[index],
             Job::FreeMotion { .. } => Scenario::FreeMotion,
         }
     }
 
-    /// The run's length: the scenario's default for Table 1 runs.
+    /// The run's length: the scenario's default for single-event runs.
     fn duration_s(self) -> Option<f64> {
         match self {
-            Job::Table1 { .. } => None,
+            Job::Single { .. } => None,
             Job::FreeMotion { .. } => Some(FREE_RUN_S),
         }
     }
@@ -693,7 +693,7 @@ impl Job {
     /// one; free motion draws from stream `u64::MAX`, beyond every scenario index.
     fn seed(self, base: u64) -> u64 {
         let (stream, k) = match self {
-            Job::Table1 { index, k } => (index as u64, k),
+            Job::Single { index, k } => (index as u64, k),
             Job::FreeMotion { k } => (u64::MAX, k),
         };
         base.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ (stream << 40) ^ k as u64
@@ -755,7 +755,7 @@ fn run_jobs(detector: &Detector, jobs: &[Job], base_seed: u64) -> Result<(Vec<Jo
 
 /// The results of `evaluate`, tallied.
 struct Tally {
-    /// One per Table 1 scenario.
+    /// One per single-event scenario.
     reports: Vec<ScenarioReport>,
     /// Free-motion runs with a confirmation.
     free_alarms: usize,
@@ -769,7 +769,7 @@ struct Tally {
 
 impl Tally {
     fn of(results: Vec<JobResult>) -> Tally {
-        let scenarios = Scenario::table1();
+        let scenarios = Scenario::single_event();
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
         let mut free_alarms = 0usize;
         let mut free_seconds = 0.0;
@@ -781,7 +781,7 @@ impl Tally {
                 failures.push((r.job.scenario(), r.seed, r.outcome.clone()));
             }
             match r.job {
-                Job::Table1 { index, .. } => outcomes[index].push(r.outcome),
+                Job::Single { index, .. } => outcomes[index].push(r.outcome),
                 Job::FreeMotion { .. } => {
                     free_seconds += r.seconds;
                     free_alarms += usize::from(!r.outcome.is_right());

@@ -72,8 +72,10 @@ fn equal_seeds_of_different_scenarios_are_independent() {
 
 #[test]
 fn scenario_names_and_expected_events() {
-    assert_eq!(Scenario::all().len(), 14);
+    assert_eq!(Scenario::all().len(), 19);
     assert_eq!(Scenario::table1().len(), 13);
+    assert_eq!(Scenario::single_event().len(), 18);
+    assert!(!Scenario::single_event().contains(&Scenario::FreeMotion));
     let expected = [
         ("contact_hard_8", Some("contact")),
         ("contact_hard_5", Some("contact")),
@@ -88,6 +90,11 @@ fn scenario_names_and_expected_events() {
         ("disturbance_small_5", Some("disturbance")),
         ("sudden_accel_standstill", None),
         ("sudden_accel_moving_5", None),
+        ("contact_braking", Some("contact")),
+        ("contact_very_soft_1", Some("contact")),
+        ("disturbance_slow_2", Some("disturbance")),
+        ("knock_link1", Some("disturbance")),
+        ("knock_link2", Some("disturbance")),
         ("free_motion", None),
     ];
     for (s, (name, event)) in Scenario::all().iter().zip(expected) {
@@ -111,8 +118,8 @@ fn scenario_names_and_expected_events() {
         .parse::<Scenario>()
         .unwrap_err()
         .to_string();
-    assert!(
-        e.contains("contact_hard_9") && e.contains("free_motion"),
-        "{e}"
-    );
+    assert!(e.contains("contact_hard_9"), "{e}");
+    for s in Scenario::all() {
+        assert!(e.contains(s.name()), "{e} does not list {s}");
+    }
 }

@@ -8,17 +8,18 @@
 //! ```text
 //!  controller force ─> [arm] ──link spring/damper── [distal link + carrier] ──foam── [skin] ─> object
 //!                        │                               │ (force sensor between        (contact on x,
-//!                   obstacle (x)                         │  distal link and carrier)     friction on y)
-//!                                                   disturbance
+//!                   obstacle (x),                        │  distal link and carrier)     friction on y)
+//!                   knock                           disturbance
 //! ```
 //!
 //! - `arm`: the proximal part of the finger, position-controlled by a PD law with
 //!   feedforward of the commanded acceleration, run at the controller rate on the
 //!   motor-side position (quantized to the encoder resolution). The drive adds a small
 //!   force ripple whose frequency follows the commanded speed. In a link collision the arm
-//!   strikes the obstacle (Hunt-Crossley contact along x).
+//!   strikes the obstacle (Hunt-Crossley contact along x); a knock on the proximal link
+//!   acts here.
 //! - `distal`: the distal link and the fingertip's carrier, joined to the arm by the
-//!   structural compliance. Disturbances act here, below the force sensor.
+//!   structural compliance. Other disturbances act here, below the force sensor.
 //! - `skin`: the rubber skin on the foam core. Contact with an object acts on the skin:
 //!   a Hunt-Crossley normal force along x and a stick-slip (spring-slider) friction along y.
 //!   A movable object is a mass on a table with Coulomb friction (static and kinetic).
@@ -89,12 +90,22 @@ pub(crate) enum DisturbanceKind {
     },
 }
 
-/// A disturbance force on the distal link.
+/// The body a disturbance strikes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Struck {
+    /// The proximal link (the arm body, where the controller acts).
+    Arm,
+    /// The distal link, below the force sensor.
+    Distal,
+}
+
+/// A disturbance force on one of the finger's links.
 #[derive(Clone, Debug)]
 pub(crate) struct DisturbanceSetup {
     pub start: f64,
     pub kind: DisturbanceKind,
     pub direction: f64,
+    pub body: Struck,
 }
 
 impl DisturbanceSetup {
@@ -300,7 +311,9 @@ struct Loads {
     drive: f64,
     /// The obstacle's force pushing the arm back.
     obstacle: f64,
-    /// The disturbance on the distal body.
+    /// A disturbance striking the arm (the proximal link).
+    knock: f64,
+    /// A disturbance striking the distal body.
     disturbance: f64,
     /// The object's force on the skin.
     object: f64,
@@ -344,7 +357,7 @@ impl Axis {
         let fl = chain.link.force(self.xa - self.xd, self.va - self.vd);
         let ff = foam.force(self.xd - self.xs, self.vd - self.vs);
         Accelerations {
-            arm: (loads.drive - fl - loads.obstacle) / chain.arm_mass,
+            arm: (loads.drive - fl - loads.obstacle + loads.knock) / chain.arm_mass,
             distal: (fl - ff + loads.disturbance) / chain.distal_mass,
             skin: (ff + loads.object) / chain.skin_mass,
             foam_force: ff,
@@ -846,16 +859,26 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let drive = |k: usize| -> f64 {
             controller.force[k] + ripple_force[k] - chain.friction(axes[k].va)
         };
+        let on_arm = disturbance
+            .as_ref()
+            .is_some_and(|d| d.setup.body == Struck::Arm);
+        let (knock, f_d) = if on_arm {
+            (f_d, [0.0; 2])
+        } else {
+            ([0.0; 2], f_d)
+        };
         let loads = [
             Loads {
                 drive: drive(0),
                 obstacle: f_ob,
+                knock: knock[0],
                 disturbance: f_d[0],
                 object: -f_n,
             },
             Loads {
                 drive: drive(1),
                 obstacle: 0.0,
+                knock: knock[1],
                 disturbance: f_d[1],
                 object: f_t,
             },

@@ -21,10 +21,12 @@ mod engine;
 mod trajectory;
 
 use crate::trace::{Labels, Trace, TraceError};
-use engine::{DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup};
+use engine::{
+    DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup, Struck,
+};
 use params::{
-    HardObject, LargeDisturbance, Motion, MovableObject, Obstacle, Plant, Sensors,
-    SmallDisturbance, SoftObject, SuddenAccel,
+    Braking, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle, Plant, Sensors,
+    SmallDisturbance, SoftObject, SuddenAccel, VerySoftObject,
 };
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -190,6 +192,16 @@ pub enum Scenario {
     SuddenAccelStandstill,
     /// A sudden commanded acceleration while moving at 5 cm/s.
     SuddenAccelMoving5,
+    /// Contact with a hard or soft object while the finger brakes.
+    ContactBraking,
+    /// Contact with a very soft object at 1 cm/s.
+    ContactVerySoft1,
+    /// A large or small disturbance while cruising at 2 cm/s.
+    DisturbanceSlow2,
+    /// A knock on the proximal link while moving at 5 cm/s.
+    KnockLink1,
+    /// A knock on the distal link while moving at 5 cm/s.
+    KnockLink2,
     /// Random event-free motion (pauses and moves, sudden ones included), no contact.
     FreeMotion,
 }
@@ -198,8 +210,11 @@ pub enum Scenario {
 #[derive(Clone, Copy, Debug)]
 enum Kind {
     Contact(ObjectKind),
+    /// A contact while braking: a hard or a soft object.
+    BrakingContact,
     Collision,
-    Disturbance { large: bool },
+    Disturbance(Size),
+    Knock(Struck),
     SuddenAccel,
     Free,
 }
@@ -208,12 +223,23 @@ enum Kind {
 enum ObjectKind {
     Hard,
     Soft,
+    VerySoft,
     Movable,
 }
 
+/// A disturbance's size: one of the two groups, or either (equally likely in randomized
+/// runs, large in nominal ones).
+#[derive(Clone, Copy, Debug)]
+enum Size {
+    Large,
+    Small,
+    Either,
+}
+
 impl Scenario {
-    /// Every scenario: the 13 Table 1 runs, then free motion.
-    pub const ALL: [Scenario; 14] = [
+    /// Every scenario: the 13 Table 1 runs, the 5 runs that widen the envelope beyond
+    /// them, then free motion.
+    pub const ALL: [Scenario; 19] = [
         Scenario::ContactHard8,
         Scenario::ContactHard5,
         Scenario::ContactHard2,
@@ -227,10 +253,15 @@ impl Scenario {
         Scenario::DisturbanceSmall5,
         Scenario::SuddenAccelStandstill,
         Scenario::SuddenAccelMoving5,
+        Scenario::ContactBraking,
+        Scenario::ContactVerySoft1,
+        Scenario::DisturbanceSlow2,
+        Scenario::KnockLink1,
+        Scenario::KnockLink2,
         Scenario::FreeMotion,
     ];
 
-    /// Every scenario: the 13 Table 1 runs, then free motion.
+    /// Every scenario: the 13 Table 1 runs, the 5 beyond them, then free motion.
     pub fn all() -> &'static [Scenario] {
         &Scenario::ALL
     }
@@ -238,6 +269,12 @@ impl Scenario {
     /// The 13 runs of the paper's Table 1.
     pub fn table1() -> &'static [Scenario] {
         &Scenario::ALL[..13]
+    }
+
+    /// Every scenario with one event (or one sudden acceleration) per run: all but free
+    /// motion, the runs `fingertip evaluate` scores one by one.
+    pub fn single_event() -> &'static [Scenario] {
+        &Scenario::ALL[..18]
     }
 
     /// The scenario's name, e.g. `contact_hard_8`.
@@ -256,6 +293,11 @@ impl Scenario {
             Scenario::DisturbanceSmall5 => "disturbance_small_5",
             Scenario::SuddenAccelStandstill => "sudden_accel_standstill",
             Scenario::SuddenAccelMoving5 => "sudden_accel_moving_5",
+            Scenario::ContactBraking => "contact_braking",
+            Scenario::ContactVerySoft1 => "contact_very_soft_1",
+            Scenario::DisturbanceSlow2 => "disturbance_slow_2",
+            Scenario::KnockLink1 => "knock_link1",
+            Scenario::KnockLink2 => "knock_link2",
             Scenario::FreeMotion => "free_motion",
         }
     }
@@ -269,19 +311,23 @@ impl Scenario {
     /// or `None` (sudden acceleration and free motion: nothing may be confirmed).
     pub fn expected(self) -> Option<&'static str> {
         match self.kind() {
-            Kind::Contact(_) => Some(CONTACT),
+            Kind::Contact(_) | Kind::BrakingContact => Some(CONTACT),
             Kind::Collision => Some(LINK_COLLISION),
-            Kind::Disturbance { .. } => Some(DISTURBANCE),
+            Kind::Disturbance(_) | Kind::Knock(_) => Some(DISTURBANCE),
             Kind::SuddenAccel | Kind::Free => None,
         }
     }
 
-    /// The nominal commanded speed before the event, in m/s (0 for free motion and the
-    /// standstill start).
+    /// The nominal commanded speed before the event (before braking in
+    /// `contact_braking`), in m/s (0 for free motion and the standstill start).
     pub fn nominal_speed(self) -> f64 {
         match self {
             Scenario::ContactHard8 | Scenario::ContactSoft8 | Scenario::LinkCollision8 => 0.08,
-            Scenario::ContactHard2 | Scenario::ContactSoft2 | Scenario::LinkCollision2 => 0.02,
+            Scenario::ContactHard2
+            | Scenario::ContactSoft2
+            | Scenario::LinkCollision2
+            | Scenario::DisturbanceSlow2 => 0.02,
+            Scenario::ContactVerySoft1 => 0.01,
             Scenario::SuddenAccelStandstill | Scenario::FreeMotion => 0.0,
             _ => 0.05,
         }
@@ -307,6 +353,15 @@ impl Scenario {
             }
             Scenario::SuddenAccelStandstill => "sudden commanded acceleration from standstill",
             Scenario::SuddenAccelMoving5 => "sudden commanded acceleration while moving at 5 cm/s",
+            Scenario::ContactBraking => {
+                "fingertip contacts a hard or soft object while braking from 5 cm/s"
+            }
+            Scenario::ContactVerySoft1 => "fingertip contacts a very soft object at 1 cm/s",
+            Scenario::DisturbanceSlow2 => {
+                "large or small shock or vibration reaches the fingertip while moving at 2 cm/s"
+            }
+            Scenario::KnockLink1 => "the proximal link is knocked while moving at 5 cm/s",
+            Scenario::KnockLink2 => "the distal link is knocked while moving at 5 cm/s",
             Scenario::FreeMotion => "random event-free motion, touching nothing",
         }
     }
@@ -320,9 +375,14 @@ impl Scenario {
                 Kind::Contact(ObjectKind::Soft)
             }
             Scenario::ObjectMoves5 => Kind::Contact(ObjectKind::Movable),
+            Scenario::ContactVerySoft1 => Kind::Contact(ObjectKind::VerySoft),
+            Scenario::ContactBraking => Kind::BrakingContact,
             Scenario::LinkCollision8 | Scenario::LinkCollision2 => Kind::Collision,
-            Scenario::DisturbanceLarge5 => Kind::Disturbance { large: true },
-            Scenario::DisturbanceSmall5 => Kind::Disturbance { large: false },
+            Scenario::DisturbanceLarge5 => Kind::Disturbance(Size::Large),
+            Scenario::DisturbanceSmall5 => Kind::Disturbance(Size::Small),
+            Scenario::DisturbanceSlow2 => Kind::Disturbance(Size::Either),
+            Scenario::KnockLink1 => Kind::Knock(Struck::Arm),
+            Scenario::KnockLink2 => Kind::Knock(Struck::Distal),
             Scenario::SuddenAccelStandstill | Scenario::SuddenAccelMoving5 => Kind::SuddenAccel,
             Scenario::FreeMotion => Kind::Free,
         }
@@ -338,7 +398,7 @@ impl fmt::Display for Scenario {
 /// The name is not one of [`Scenario::all`]'s.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, free_motion)"
+    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, contact_braking, contact_very_soft_1, disturbance_slow_2, knock_link1, knock_link2, free_motion)"
 )]
 pub struct UnknownScenario(pub String);
 
@@ -364,7 +424,7 @@ pub struct SimOptions {
     /// The robot controller's tick rate (500 Hz to 10 kHz): context updates and position
     /// control.
     pub controller_rate_hz: f64,
-    /// Length of the run in seconds (at most 3600). `None`: onset + 130 ms for Table 1
+    /// Length of the run in seconds (at most 3600). `None`: onset + 130 ms for single-event
     /// runs, 10 s for free motion.
     pub duration_s: Option<f64>,
 }
@@ -613,8 +673,56 @@ fn approach_scene(
             });
             scene.scheduled_onset = Some(onset);
         }
-        Kind::Disturbance { large } => {
+        Kind::BrakingContact => {
+            let b = Braking::choose(prng, r);
+            values.extend(b.values());
+            let start = (onset / period).round() as u64;
+            let stop_ticks = (speed / b.deceleration / period).round() as u64;
+            let contact = start + (b.contact_fraction * stop_ticks as f64).round() as u64;
+            let decel = [-b.deceleration * dir[0], -b.deceleration * dir[1]];
+            scene.trajectory.set_accel(start, decel);
+            scene.trajectory.set_accel(start + stop_ticks, [0.0; 2]);
+            let surface = scene.trajectory.at(contact).p[0];
+            let hard = !r || prng.random::<f64>() < 0.5;
+            let object = if hard {
+                ObjectKind::Hard
+            } else {
+                ObjectKind::Soft
+            };
+            meta.push(("object".into(), if hard { "hard" } else { "soft" }.into()));
+            meta.push(("brake_onset_s".into(), fmt_f64(start as f64 * period)));
+            scene.object = Some(contact_object(object, surface, prng, r, values));
+            scene.scheduled_onset = Some(contact as f64 * period);
+            scene.default_duration = contact as f64 * period + AFTER_ONSET_S;
+        }
+        Kind::Disturbance(size) => {
+            let large = match size {
+                Size::Large => true,
+                Size::Small => false,
+                Size::Either => !r || prng.random::<f64>() < 0.5,
+            };
+            if matches!(size, Size::Either) {
+                let name = if large { "large" } else { "small" };
+                meta.push(("disturbance_size".into(), name.into()));
+            }
             scene.disturbance = Some(disturbance_setup(large, onset, prng, r, values, meta));
+            scene.scheduled_onset = Some(onset);
+        }
+        Kind::Knock(body) => {
+            let k = Knock::choose(prng, r);
+            values.extend(k.values());
+            let direction = random_direction(prng, r) + k.direction_offset;
+            meta.push(("disturbance_kind".into(), "knock".into()));
+            meta.push(("disturbance_direction_rad".into(), fmt_f64(direction)));
+            scene.disturbance = Some(DisturbanceSetup {
+                start: onset,
+                kind: DisturbanceKind::Impulse {
+                    peak: k.peak,
+                    duration: k.duration,
+                },
+                direction,
+                body,
+            });
             scene.scheduled_onset = Some(onset);
         }
         Kind::SuddenAccel => {
@@ -666,6 +774,11 @@ fn contact_object(
         }
         ObjectKind::Soft => {
             let o = SoftObject::choose(prng, r);
+            values.extend(o.values());
+            (o.stiffness, o.damping, None)
+        }
+        ObjectKind::VerySoft => {
+            let o = VerySoftObject::choose(prng, r);
             values.extend(o.values());
             (o.stiffness, o.damping, None)
         }
@@ -724,12 +837,7 @@ fn disturbance_setup(
     // Nominal: a vibration against the approach (-x). Randomized: impulse or
     // vibration, towards +x or -x, each equally likely.
     let impulse = r && prng.random::<f64>() < 0.5;
-    let towards_plus_x = r && prng.random::<f64>() < 0.5;
-    let base = if towards_plus_x {
-        0.0
-    } else {
-        std::f64::consts::PI
-    };
+    let base = random_direction(prng, r);
     let kind = if impulse {
         DisturbanceKind::Impulse { peak, duration }
     } else {
@@ -748,6 +856,17 @@ fn disturbance_setup(
         start: onset,
         kind,
         direction: base + offset,
+        body: Struck::Distal,
+    }
+}
+
+/// A disturbance's base direction: against the approach (-x, angle pi) in nominal runs,
+/// +x or -x equally likely in randomized ones.
+fn random_direction(prng: &mut Xoshiro256PlusPlus, r: bool) -> f64 {
+    if r && prng.random::<f64>() < 0.5 {
+        0.0
+    } else {
+        std::f64::consts::PI
     }
 }
 

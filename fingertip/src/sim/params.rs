@@ -187,8 +187,9 @@ param_group! {
         speed_factor: "1" = 1.0, [0.8, 1.2];
         /// Angle of the commanded velocity from the pad normal x, towards y.
         approach_angle: "rad" = 0.0, [-0.1745, 0.1745];
-        /// When the event (first contact, collision or disturbance) begins. Every Table 1
-        /// run lasts onset + 130 ms.
+        /// When the event (first contact, collision or disturbance) begins (in
+        /// `contact_braking`, when the braking begins). Every single-event run lasts
+        /// onset + 130 ms.
         onset: "s" = 0.020, [0.015, 0.040];
     }
 }
@@ -210,6 +211,48 @@ param_group! {
         stiffness: "N/m" = 2000.0, [1000.0, 3000.0];
         /// Hunt-Crossley damping.
         damping: "s/m" = 40.0, [20.0, 80.0];
+    }
+}
+
+param_group! {
+    /// A very soft object (open-cell foam, a ripe fruit's skin), touched slowly: the force
+    /// builds at only stiffness x speed (0.4 to 1.2 N/s at 1 cm/s).
+    struct VerySoftObject, group "very_soft_object" {
+        /// Contact stiffness.
+        stiffness: "N/m" = 80.0, [40.0, 120.0];
+        /// Hunt-Crossley damping.
+        damping: "s/m" = 40.0, [20.0, 80.0];
+    }
+}
+
+param_group! {
+    /// A contact while the finger brakes, as a real approach slows near the object: the
+    /// commanded velocity falls at a constant deceleration from `motion.onset` on (until
+    /// the finger would stop), and the object's surface is where the command is a chosen
+    /// fraction of that stopping time later. Randomized runs touch a hard object or a
+    /// soft one (the `hard_object` or `soft_object` ranges), equally likely; nominal runs a
+    /// hard one.
+    struct Braking, group "braking" {
+        /// The commanded deceleration.
+        deceleration: "m/s^2" = 0.6, [0.3, 1.0];
+        /// When the contact happens, as a fraction of the time the deceleration would take
+        /// to stop the finger.
+        contact_fraction: "1" = 0.4, [0.2, 0.6];
+    }
+}
+
+param_group! {
+    /// A knock: a short half-sine force pulse struck on a link of the finger, not on the
+    /// fingertip (a person's hand, a tool, a neighbouring finger), in a direction within 45
+    /// degrees of +x or -x (equally likely in randomized runs; nominal: against the
+    /// approach). The finger is pushed off its path and the controller brings it back.
+    struct Knock, group "knock" {
+        /// Peak force.
+        peak: "N" = 6.0, [2.0, 15.0];
+        /// Duration of the pulse.
+        duration: "s" = 0.001, [0.0005, 0.003];
+        /// Angle of the force from the nearer of +x and -x, towards y.
+        direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
 }
 
@@ -314,8 +357,8 @@ param_group! {
     }
 }
 
-/// Every parameter of every group, in a stable order (plant, sensors, motion, objects,
-/// obstacle, disturbance, sudden acceleration, free motion).
+/// Every parameter of every group, in a stable order (plant, sensors, motion, objects and
+/// braking, obstacle, disturbances and knocks, sudden acceleration, free motion).
 pub fn all_specs() -> Vec<ParamSpec> {
     let mut v = Vec::new();
     for g in [
@@ -324,10 +367,13 @@ pub fn all_specs() -> Vec<ParamSpec> {
         Motion::SPECS,
         HardObject::SPECS,
         SoftObject::SPECS,
+        VerySoftObject::SPECS,
+        Braking::SPECS,
         MovableObject::SPECS,
         Obstacle::SPECS,
         LargeDisturbance::SPECS,
         SmallDisturbance::SPECS,
+        Knock::SPECS,
         SuddenAccel::SPECS,
         FreeMotion::SPECS,
     ] {
