@@ -151,9 +151,10 @@ enum Command {
         /// Base seed; run k of a scenario uses a seed derived from it.
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Detector configuration (TOML); the approach configuration when absent.
+        /// Detector configuration (TOML); the approach configuration when absent. Give it
+        /// up to four times to compare detectors on the very same runs, side by side.
         #[arg(long)]
-        config: Option<PathBuf>,
+        config: Vec<PathBuf>,
         /// Hours of simulated event-free motion for the false-alarm rate.
         #[arg(long, default_value_t = 1.0)]
         free_hours: f64,
@@ -289,7 +290,7 @@ fn run(cli: Cli) -> Result<()> {
             config,
             free_hours,
             json,
-        } => evaluate(runs, seed, config.as_deref(), free_hours, json.as_deref()),
+        } => evaluate(runs, seed, &config, free_hours, json.as_deref()),
         Command::Demo { out } => demo(&out),
     }
 }
@@ -704,13 +705,14 @@ impl Job {
 struct JobResult {
     job: Job,
     seed: u64,
-    outcome: Outcome,
+    /// One per detector, in `--config` order.
+    outcomes: Vec<Outcome>,
     /// Simulated time (s).
     seconds: f64,
 }
 
-/// Simulates and scores one job.
-fn run_job(detector: &Detector, job: Job, base_seed: u64) -> Result<JobResult> {
+/// Simulates one job and scores it with each detector.
+fn run_job(detectors: &[Detector], job: Job, base_seed: u64) -> Result<JobResult> {
     let scenario = job.scenario();
     let seed = job.seed(base_seed);
     let opts = SimOptions {
@@ -720,22 +722,28 @@ fn run_job(detector: &Detector, job: Job, base_seed: u64) -> Result<JobResult> {
         ..SimOptions::default()
     };
     let trace = sim::simulate(&scenario, &opts)?;
-    let decisions = replay::replay(detector, &trace, |_, _, _| {})?;
     let truth = truth_of(&trace);
     let expected = scenario
         .expected()
         .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
+    let outcomes = detectors
+        .iter()
+        .map(|d| {
+            let decisions = replay::replay(d, &trace, |_, _, _| {})?;
+            Ok(score::classify(expected, &decisions))
+        })
+        .collect::<Result<Vec<Outcome>>>()?;
     Ok(JobResult {
         job,
         seed,
-        outcome: score::classify(expected, &decisions),
+        outcomes,
         seconds: trace.len() as f64 / trace.rate_hz(),
     })
 }
 
 /// Runs every job on all cores behind a progress bar; the results in job order and the
 /// wall time taken (s).
-fn run_jobs(detector: &Detector, jobs: &[Job], base_seed: u64) -> Result<(Vec<JobResult>, f64)> {
+fn run_jobs(detectors: &[Detector], jobs: &[Job], base_seed: u64) -> Result<(Vec<JobResult>, f64)> {
     let bar = ProgressBar::new(jobs.len() as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")?
             .progress_chars("=> "),
@@ -744,7 +752,7 @@ fn run_jobs(detector: &Detector, jobs: &[Job], base_seed: u64) -> Result<(Vec<Jo
     let results: Result<Vec<JobResult>> = jobs
         .par_iter()
         .map(|&job| {
-            let result = run_job(detector, job, base_seed);
+            let result = run_job(detectors, job, base_seed);
             bar.inc(1);
             result
         })
@@ -761,30 +769,30 @@ struct Tally {
     free_alarms: usize,
     /// Hours of free motion simulated.
     free_hours: f64,
-    /// Simulated time of all runs (s).
-    simulated_s: f64,
     /// Every run that went wrong, in job order: scenario, seed, outcome.
     failures: Vec<(Scenario, u64, Outcome)>,
 }
 
 impl Tally {
-    fn of(results: Vec<JobResult>) -> Tally {
+    /// The tally of detector `d`'s outcomes.
+    fn of(results: &[JobResult], d: usize) -> Tally {
         let scenarios = Scenario::single_event();
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
         let mut free_alarms = 0usize;
         let mut free_seconds = 0.0;
-        let mut simulated_s = 0.0;
         let mut failures = Vec::new();
         for r in results {
-            simulated_s += r.seconds;
-            if !r.outcome.is_right() {
-                failures.push((r.job.scenario(), r.seed, r.outcome.clone()));
+            let Some(outcome) = r.outcomes.get(d) else {
+                continue;
+            };
+            if !outcome.is_right() {
+                failures.push((r.job.scenario(), r.seed, outcome.clone()));
             }
             match r.job {
-                Job::Single { index, .. } => outcomes[index].push(r.outcome),
+                Job::Single { index, .. } => outcomes[index].push(outcome.clone()),
                 Job::FreeMotion { .. } => {
                     free_seconds += r.seconds;
-                    free_alarms += usize::from(!r.outcome.is_right());
+                    free_alarms += usize::from(!outcome.is_right());
                 }
             }
         }
@@ -796,7 +804,6 @@ impl Tally {
                 .collect(),
             free_alarms,
             free_hours: free_seconds / 3600.0,
-            simulated_s,
             failures,
         }
     }
@@ -842,12 +849,22 @@ impl Tally {
                 r.latency_ms.max
             );
         }
+        self.print_false_alarms("");
+        self.print_failures();
+    }
+
+    /// The false-alarm line, after `prefix`.
+    fn print_false_alarms(&self, prefix: &str) {
         println!(
-            "false alarms: {} runs with a confirmation in {:.2} h of event-free motion = {:.2} per hour",
+            "{prefix}false alarms: {} runs with a confirmation in {:.2} h of event-free motion = {:.2} per hour",
             self.free_alarms,
             self.free_hours,
             self.alarms_per_hour()
         );
+    }
+
+    /// The first failures of each scenario, with the command that reproduces them.
+    fn print_failures(&self) {
         if self.failures.is_empty() {
             return;
         }
@@ -872,16 +889,85 @@ impl Tally {
             );
         }
     }
+
+    /// The report as JSON, named by its configuration.
+    fn json(&self, config: &str) -> serde_json::Value {
+        serde_json::json!({
+            "config": config,
+            "scenarios": self.reports,
+            "false_alarms": self.free_alarms,
+            "false_alarms_per_hour": self.alarms_per_hour(),
+            "free_motion_hours": self.free_hours,
+        })
+    }
 }
+
+/// Several detectors' tallies side by side: per scenario and detector, right / runs,
+/// wrong, missed, repeated and the latency's median and p99; then each one's false alarms
+/// and failures.
+fn print_comparison(tallies: &[(String, Tally)]) {
+    for (k, (name, _)) in tallies.iter().enumerate() {
+        println!("[{}] {name}", k + 1);
+    }
+    let mut head = format!("{:<26} {:>6}", "scenario", "runs");
+    for k in 1..=tallies.len() {
+        head.push_str(&format!(
+            " | [{k}] {:>6} {:>5} {:>5} {:>5} {:>6} {:>6}",
+            "right", "wrong", "miss", "rep", "med", "p99"
+        ));
+    }
+    println!("{head}");
+    let Some((_, first)) = tallies.first() else {
+        return;
+    };
+    for (i, r) in first.reports.iter().enumerate() {
+        let mut line = format!("{:<26} {:>6}", r.name, r.runs);
+        for (_, t) in tallies {
+            if let Some(r) = t.reports.get(i) {
+                line.push_str(&format!(
+                    " |     {:>6} {:>5} {:>5} {:>5} {:>6.2} {:>6.2}",
+                    r.correct, r.wrong, r.missed, r.repeated, r.latency_ms.median, r.latency_ms.p99
+                ));
+            }
+        }
+        println!("{line}");
+    }
+    for (k, (_, t)) in tallies.iter().enumerate() {
+        t.print_false_alarms(&format!("[{}] ", k + 1));
+    }
+    for (k, (name, t)) in tallies.iter().enumerate() {
+        if !t.failures.is_empty() {
+            println!("[{}] {name}:", k + 1);
+            t.print_failures();
+        }
+    }
+}
+
+/// At most this many `--config` in one evaluation (the comparison table's width).
+const MAX_COMPARED: usize = 4;
 
 fn evaluate(
     runs: usize,
     seed: u64,
-    config: Option<&Path>,
+    configs: &[PathBuf],
     free_hours: f64,
     json: Option<&Path>,
 ) -> Result<()> {
-    let (detector, config_name) = load_detector(config)?;
+    if configs.len() > MAX_COMPARED {
+        bail!(
+            "--config is given {} times: at most {MAX_COMPARED} detectors are compared at once",
+            configs.len()
+        );
+    }
+    let loaded = if configs.is_empty() {
+        vec![load_detector(None)?]
+    } else {
+        configs
+            .iter()
+            .map(|c| load_detector(Some(c)))
+            .collect::<Result<Vec<_>>>()?
+    };
+    let (detectors, names): (Vec<Detector>, Vec<String>) = loaded.into_iter().unzip();
     if !(1..=MAX_RUNS).contains(&runs) {
         bail!("--runs = {runs} must be within 1..={MAX_RUNS} runs per scenario");
     }
@@ -892,28 +978,50 @@ fn evaluate(
         );
     }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
-    let (results, wall) = run_jobs(&detector, &Job::all(runs, free_runs), seed)?;
-    let tally = Tally::of(results);
-    let speed = tally.simulated_s / wall.max(1e-9);
+    let (results, wall) = run_jobs(&detectors, &Job::all(runs, free_runs), seed)?;
+    let tallies: Vec<(String, Tally)> = names
+        .into_iter()
+        .enumerate()
+        .map(|(d, name)| (name, Tally::of(&results, d)))
+        .collect();
+    let simulated_s: f64 = results.iter().map(|r| r.seconds).sum();
+    let speed = simulated_s / wall.max(1e-9);
 
-    println!("{config_name}: {runs} randomized runs per scenario, base seed {seed}");
-    tally.print();
+    match tallies.as_slice() {
+        [(name, tally)] => {
+            println!("{name}: {runs} randomized runs per scenario, base seed {seed}");
+            tally.print();
+        }
+        _ => {
+            println!(
+                "{runs} randomized runs per scenario, base seed {seed}, the same runs for each detector"
+            );
+            print_comparison(&tallies);
+        }
+    }
     println!(
-        "throughput: {:.0} simulated s in {wall:.1} wall s = {speed:.0} simulated s per wall s ({} threads)",
-        tally.simulated_s,
-        rayon::current_num_threads()
+        "throughput: {simulated_s:.0} simulated s in {wall:.1} wall s = {speed:.0} simulated s per wall s ({} threads, {} detector(s) per run)",
+        rayon::current_num_threads(),
+        tallies.len()
     );
     if let Some(path) = json {
-        let report = serde_json::json!({
-            "config": config_name,
+        let mut report = serde_json::json!({
             "runs_per_scenario": runs,
             "seed": seed,
-            "scenarios": tally.reports,
-            "false_alarms": tally.free_alarms,
-            "false_alarms_per_hour": tally.alarms_per_hour(),
-            "free_motion_hours": tally.free_hours,
             "simulated_s_per_wall_s": speed,
         });
+        // One detector: its fields at the top level; several: a list of them.
+        if let [(name, t)] = tallies.as_slice() {
+            if let (Some(r), serde_json::Value::Object(one)) =
+                (report.as_object_mut(), t.json(name))
+            {
+                r.extend(one);
+            }
+        } else {
+            let per_config: Vec<serde_json::Value> =
+                tallies.iter().map(|(name, t)| t.json(name)).collect();
+            report["configs"] = serde_json::Value::from(per_config);
+        }
         write_atomically(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())

@@ -128,6 +128,58 @@ fn evaluate_writes_the_documented_report() {
     assert!(report["free_motion_hours"].as_f64().expect("hours") >= 0.005);
 }
 
+/// `--config` twice compares detectors on the very same runs: the same configuration given
+/// twice tallies identically, and the paper's reference sits beside it in one report; a
+/// fifth configuration is refused before any run.
+#[test]
+fn evaluate_compares_configurations_on_the_same_runs() {
+    let dir = scratch("compare");
+    let json = dir.join("compare.json");
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
+    let approach = format!("{root}approach.toml");
+    let paper = format!("{root}paper.toml");
+    fn args<'a>(configs: &[&'a str]) -> Vec<&'a str> {
+        let mut a = vec!["evaluate", "--runs", "3", "--free-hours", "0.005"];
+        for c in configs {
+            a.extend(["--config", c]);
+        }
+        a
+    }
+    let mut with_json = args(&[&approach, &paper, &approach]);
+    with_json.extend(["--json", json.to_str().expect("utf-8")]);
+    let out = fingertip(&with_json);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.contains("[2] ") && stdout.contains("paper.toml"),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    let configs = report["configs"].as_array().expect("configs");
+    assert_eq!(configs.len(), 3);
+    assert_eq!(configs[0]["scenarios"], configs[2]["scenarios"]);
+    assert!(
+        configs[1]["config"]
+            .as_str()
+            .expect("name")
+            .ends_with("paper.toml")
+    );
+    for c in configs {
+        assert_eq!(
+            c["scenarios"].as_array().expect("scenarios").len(),
+            Scenario::single_event().len()
+        );
+    }
+    let five = fingertip(&args(&[&approach, &approach, &approach, &approach, &paper]));
+    assert!(!five.status.success());
+    assert!(
+        text(&five.stderr).contains("at most 4"),
+        "{}",
+        text(&five.stderr)
+    );
+}
+
 /// The frames the firmware would send decode back to the same confirmation.
 #[test]
 fn replay_candump_decodes_to_the_same_events() {

@@ -448,13 +448,59 @@ fn toml_errors() {
         }
         other => panic!("expected a validation error, got {other:?}"),
     }
-    let approach = std::fs::read_to_string(concat!(
+    for shipped in ["approach.toml", "paper.toml"] {
+        let path = format!("{}/../configs/{shipped}", env!("CARGO_MANIFEST_DIR"));
+        let text = std::fs::read_to_string(&path).expect("readable");
+        let c = Config::from_toml(&text).unwrap_or_else(|e| panic!("{shipped}: {e}"));
+        assert_eq!(Config::from_toml(&c.to_toml()).expect("round trip"), c);
+        let compiled = detector_build::compile(&c).unwrap_or_else(|e| panic!("{shipped}: {e}"));
+        assert!(
+            compiled.warnings.is_empty(),
+            "{shipped}: {:?}",
+            compiled.warnings
+        );
+    }
+}
+
+/// The paper's reference detector has its seven features exactly (section 3.1 and 3.2),
+/// each one stage of the kind the paper describes, and monitors its three events.
+#[test]
+fn paper_configuration_has_the_papers_seven_features() {
+    let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../configs/approach.toml"
+        "/../configs/paper.toml"
     ))
     .expect("readable");
-    let c = Config::from_toml(&approach).expect("approach.toml is valid");
-    assert_eq!(Config::from_toml(&c.to_toml()).expect("round trip"), c);
+    let c = Config::from_toml(&text).expect("valid");
+    let kinds: Vec<(&str, &str)> = c
+        .features
+        .iter()
+        .map(|f| {
+            let kind = match &f.stage {
+                StageSpec::Magnitude { .. } => "magnitude",
+                StageSpec::Dot { .. } => "dot",
+                StageSpec::LowPass { .. } => "low_pass",
+                StageSpec::Ste { window: 32, .. } => "ste32",
+                StageSpec::Abs { .. } => "abs",
+                _ => "other",
+            };
+            (f.name.as_str(), kind)
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("acc_des", "magnitude"),
+            ("force_dot_vel", "dot"),
+            ("vel_des", "magnitude"),
+            ("pos_err", "magnitude"),
+            ("force", "low_pass"),
+            ("ste_skin", "ste32"),
+            ("stress", "abs"),
+        ]
+    );
+    let events: Vec<&str> = c.events.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(events, ["contact", "link_collision", "disturbance"]);
 }
 
 /// A configuration of eight events with eight context and eight sensor terms each, on
