@@ -273,13 +273,19 @@ fn bad_traces_are_rejected_clearly() {
 fn bad_configurations_are_rejected_clearly() {
     let good = fingertip::APPROACH_TOML;
     let trace = format!("{HEADER}\n0,0,0,0,0,0,0,0,0,0,0\n0.0002,0,0,0,0,0,0,0,0,0,0\n");
-    let heavy = good.replacen("weight = 0.6", "weight = 0.9", 1);
+    // The default's contact weights sum to 1: its film term 0.2 heavier is 1.2.
+    let heavy = good.replacen("weight = 0.75", "weight = 0.95", 1);
+    assert_ne!(
+        heavy, good,
+        "the default configuration's contact film weight changed"
+    );
     rejects(
         &trace,
         Some(&heavy),
-        &["config.toml", "event 'contact'", "sum to 1.300"],
+        &["config.toml", "event 'contact'", "sum to 1.200"],
     );
     let unknown = good.replacen("input = \"force_x\"", "input = \"force_z\"", 1);
+    assert_ne!(unknown, good);
     rejects(
         &trace,
         Some(&unknown),
