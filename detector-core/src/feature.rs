@@ -61,6 +61,23 @@ pub enum StageSpec<N> {
         /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
+    /// Self-motion cancellation: `input − gain · y`, y the [`StageSpec::LowPass`] of `motion`
+    /// at `cutoff_hz`. What a sensor reads that the finger's own commanded motion does not
+    /// explain: a small linear filter driven by the commanded motion (e.g. the commanded
+    /// acceleration, whose inertial load on the force sensor is −m a), its gain and cut-off
+    /// identified from event-free motion. The output saturates at the
+    /// [`Signal`](crate::Signal) range.
+    Cancel {
+        /// The sensor channel or feature.
+        input: N,
+        /// The commanded motion that drives the prediction.
+        motion: N,
+        /// The prediction's gain, in the input's unit per motion unit; |gain| below 32768,
+        /// in steps of 2⁻¹⁶.
+        gain: f32,
+        /// Cut-off of the motion's low-pass, above 0 and below half the detector rate.
+        cutoff_hz: f32,
+    },
     /// Rate of change: (x_n − x_{n−1}) · f_s, in the input's unit per second. Zero on the
     /// first tick.
     Rate {
@@ -167,6 +184,17 @@ impl<N> StageSpec<N> {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
             },
+            StageSpec::Cancel {
+                input,
+                motion,
+                gain,
+                cutoff_hz,
+            } => StageSpec::Cancel {
+                input: f(input)?,
+                motion: f(motion)?,
+                gain: *gain,
+                cutoff_hz: *cutoff_hz,
+            },
             StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
             StageSpec::Difference { a, b } => StageSpec::Difference { a: f(a)?, b: f(b)? },
             StageSpec::Dot { a, b } => StageSpec::Dot {
@@ -195,6 +223,7 @@ impl<N> StageSpec<N> {
             StageSpec::Abs { .. } => "abs",
             StageSpec::LowPass { .. } => "low_pass",
             StageSpec::HighPass { .. } => "high_pass",
+            StageSpec::Cancel { .. } => "cancel",
             StageSpec::Rate { .. } => "rate",
             StageSpec::Difference { .. } => "difference",
             StageSpec::Dot { .. } => "dot",
@@ -215,6 +244,12 @@ pub enum StageError {
         cutoff_hz: f32,
         /// Half the detector rate, in Hz.
         nyquist_hz: f32,
+    },
+    /// A cancellation's gain is not finite, not below 32768 in magnitude, or not zero but
+    /// below its resolution of 2⁻¹⁶.
+    Gain {
+        /// The gain.
+        gain: f32,
     },
     /// The STE window is empty or longer than [`MAX_STE_WINDOW`].
     WindowLength {
@@ -237,6 +272,10 @@ impl core::fmt::Display for StageError {
             } => write!(
                 f,
                 "cutoff_hz = {cutoff_hz} must be above 0 and below half the detector rate ({nyquist_hz} Hz)"
+            ),
+            StageError::Gain { gain } => write!(
+                f,
+                "gain = {gain} must be finite, below 32768 in magnitude, and 0 or at least 2^-16 (0.0000153) in magnitude"
             ),
             StageError::WindowLength { window } => write!(
                 f,
@@ -282,6 +321,14 @@ pub enum StageKind {
     HighPass {
         input: u8,
         alpha: u32,
+    },
+    /// `input − gain · low-pass(motion)`, `alpha` as for [`StageKind::LowPass`], `gain` in
+    /// Q16.16 (never `i32::MIN`).
+    Cancel {
+        input: u8,
+        motion: u8,
+        alpha: u32,
+        gain: i32,
     },
     /// `rate` is the detector rate in Hz, Q8.
     Rate {
@@ -335,6 +382,17 @@ impl Stage {
             StageSpec::HighPass { input, cutoff_hz } => StageKind::HighPass {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+            },
+            StageSpec::Cancel {
+                input,
+                motion,
+                gain,
+                cutoff_hz,
+            } => StageKind::Cancel {
+                input,
+                motion,
+                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+                gain: gain_q16(gain)?,
             },
             StageSpec::Rate { input } => StageKind::Rate {
                 input,
@@ -396,6 +454,17 @@ impl Stage {
             StageKind::HighPass { input, alpha } => {
                 let x = get(input);
                 x.saturating_sub(low_pass(st, x, alpha))
+            }
+            StageKind::Cancel {
+                input,
+                motion,
+                alpha,
+                gain,
+            } => {
+                let y = low_pass(st, get(motion), alpha);
+                // |y| ≤ 2^31 and |gain| < 2^31: the product fits in 63 bits.
+                let predicted = sat32((i64::from(y) * i64::from(gain)) >> 16);
+                get(input).saturating_sub(predicted)
             }
             StageKind::Rate { input, rate } => {
                 let x = get(input);
@@ -501,6 +570,18 @@ impl Stage {
                 w.u8(input);
                 w.u32(alpha);
             }
+            StageKind::Cancel {
+                input,
+                motion,
+                alpha,
+                gain,
+            } => {
+                w.u8(StageTag::Cancel as u8);
+                w.u8(input);
+                w.u8(motion);
+                w.u32(alpha);
+                w.u32(gain as u32);
+            }
             StageKind::Rate { input, rate } => {
                 w.u8(StageTag::Rate as u8);
                 w.u8(input);
@@ -550,6 +631,12 @@ impl Stage {
                 input: r.u8()?,
                 alpha: r.u32()?,
             },
+            Some(StageTag::Cancel) => StageKind::Cancel {
+                input: r.u8()?,
+                motion: r.u8()?,
+                alpha: r.u32()?,
+                gain: r.u32()? as i32,
+            },
             Some(StageTag::Rate) => StageKind::Rate {
                 input: r.u8()?,
                 rate: r.u32()?,
@@ -595,9 +682,13 @@ impl StageKind {
             | StageKind::HighPass { input: i, .. }
             | StageKind::Rate { input: i, .. }
             | StageKind::Ste { input: i, .. } => (i as usize) < slots,
-            StageKind::Difference(a, b) | StageKind::Magnitude(a, b) => {
-                (a as usize) < slots && (b as usize) < slots
-            }
+            StageKind::Difference(a, b)
+            | StageKind::Magnitude(a, b)
+            | StageKind::Cancel {
+                input: a,
+                motion: b,
+                ..
+            } => (a as usize) < slots && (b as usize) < slots,
             StageKind::Dot([a, b, c, d]) => {
                 (a as usize) < slots
                     && (b as usize) < slots
@@ -609,11 +700,14 @@ impl StageKind {
             return Some("feature input");
         }
         match *self {
-            StageKind::LowPass { alpha, .. } | StageKind::HighPass { alpha, .. }
+            StageKind::LowPass { alpha, .. }
+            | StageKind::HighPass { alpha, .. }
+            | StageKind::Cancel { alpha, .. }
                 if alpha == 0 || alpha >= 1 << 31 =>
             {
                 Some("low-pass coefficient")
             }
+            StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
             StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
             StageKind::Ste {
                 offset, len, recip, ..
@@ -657,10 +751,11 @@ enum StageTag {
     Magnitude = 6,
     Ste = 7,
     HighPass = 8,
+    Cancel = 9,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 9] = [
+    const ALL: [StageTag; 10] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -670,6 +765,7 @@ impl StageTag {
         StageTag::Magnitude,
         StageTag::Ste,
         StageTag::HighPass,
+        StageTag::Cancel,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -690,6 +786,15 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
             StageKind::HighPass { input, alpha } => {
                 write!(f, "HighPass {{ input: {input}, alpha: {alpha} }}")
             }
+            StageKind::Cancel {
+                input,
+                motion,
+                alpha,
+                gain,
+            } => write!(
+                f,
+                "Cancel {{ input: {input}, motion: {motion}, alpha: {alpha}, gain: {gain} }}"
+            ),
             StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
             StageKind::Difference(a, b) => write!(f, "Difference({a}, {b})"),
             StageKind::Dot([a, b, c, d]) => write!(f, "Dot([{a}, {b}, {c}, {d}])"),
@@ -750,6 +855,26 @@ fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
     // relative 6·10⁻⁸, far below the filter's other errors.
     let alpha = (alpha * 2_147_483_648.0) as u64;
     Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
+}
+
+/// A cancellation gain in Q16.16: finite, |gain| < 32768, and zero or at least one step.
+/// Through `f32`, as [`low_pass_alpha`]: a relative 6·10⁻⁸.
+fn gain_q16(gain: f32) -> Result<i32, StageError> {
+    let scaled = gain * 65536.0;
+    // 2^31 and the f32 values below it are exact, and rounding half away from zero keeps
+    // them below 2^31 in magnitude (the f32 below 2^31 is 2^31 − 128).
+    if !(scaled.is_finite() && scaled.abs() < 2_147_483_648.0) {
+        return Err(StageError::Gain { gain });
+    }
+    let q = if scaled >= 0.0 {
+        (scaled + 0.5) as i32
+    } else {
+        (scaled - 0.5) as i32
+    };
+    if q == 0 && gain != 0.0 {
+        return Err(StageError::Gain { gain });
+    }
+    Ok(q)
 }
 
 /// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The

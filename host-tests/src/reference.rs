@@ -28,7 +28,8 @@
 //! - **Features** ([`Model::tick`]): raw, |x|, low-pass y ← y + α(x − y) with
 //!   α = Δt/(τ + Δt), τ = 1/(2π f_c), seeded with the first sample (the documentation does
 //!   not say where y starts; the engine seeds it, and a filter starting at 0 would only add
-//!   a start-up transient); rate (x_n − x_{n−1}) f_s, 0 on the first tick; a − b;
+//!   a start-up transient); high-pass x − y; cancel x − g y with y the low-pass of the
+//!   motion input; rate (x_n − x_{n−1}) f_s, 0 on the first tick; a − b;
 //!   a_x b_x + a_y b_y; √(x² + y²); STE (eq. 17)
 //!   ζ_n = Σ_{m=0}^{N−1} x²(n − m) h(m) with h normalized to sum 1 ([`window`]) and samples
 //!   before the first counted as zero.
@@ -178,13 +179,31 @@ impl std::error::Error for ModelError {}
 enum Stage {
     Raw(usize),
     Abs(usize),
-    LowPass { input: usize, alpha: f64 },
-    HighPass { input: usize, alpha: f64 },
-    Rate { input: usize, rate: f64 },
+    LowPass {
+        input: usize,
+        alpha: f64,
+    },
+    HighPass {
+        input: usize,
+        alpha: f64,
+    },
+    Cancel {
+        input: usize,
+        motion: usize,
+        alpha: f64,
+        gain: f64,
+    },
+    Rate {
+        input: usize,
+        rate: f64,
+    },
     Difference(usize, usize),
     Dot([usize; 2], [usize; 2]),
     Magnitude([usize; 2]),
-    Ste { input: usize, h: Vec<f64> },
+    Ste {
+        input: usize,
+        h: Vec<f64>,
+    },
 }
 
 /// A term: the feature slot it judges, its CDF and its weight (0 for context terms).
@@ -372,6 +391,17 @@ impl Model {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
                 },
+                StageSpec::Cancel {
+                    input,
+                    motion,
+                    gain,
+                    cutoff_hz,
+                } => Stage::Cancel {
+                    input,
+                    motion,
+                    alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                    gain: f64::from(gain),
+                },
                 StageSpec::Rate { input } => Stage::Rate { input, rate },
                 StageSpec::Difference { a, b } => Stage::Difference(a, b),
                 StageSpec::Dot { a, b } => Stage::Dot(a, b),
@@ -506,6 +536,12 @@ impl Model {
                     let x = v(*input);
                     x - st.low_pass(x, *alpha)
                 }
+                Stage::Cancel {
+                    input,
+                    motion,
+                    alpha,
+                    gain,
+                } => v(*input) - gain * st.low_pass(v(*motion), *alpha),
                 Stage::Rate { input, rate } => {
                     let x = v(*input);
                     let r = st.previous.map_or(0.0, |p| (x - p) * rate);

@@ -392,6 +392,39 @@ fn other_rules() {
         },
         &["cutoff_hz = 500", "500 Hz"],
     );
+    reject(|c| c.events[0].confirm.hold_ms = -1.0, &["hold_ms = -1"]);
+    reject(
+        |c| c.events[0].alert.hold_ms = f32::NAN,
+        &["alert level", "hold_ms = NaN"],
+    );
+    let cancel = |gain: f32, motion: &str| StageSpec::Cancel {
+        input: name("a"),
+        motion: name(motion),
+        gain,
+        cutoff_hz: 50.0,
+    };
+    for (gain, shown) in [
+        (f32::NAN, "gain = NaN"),
+        (f32::INFINITY, "gain = inf"),
+        (40_000.0, "gain = 40000"),
+        (-32_768.0, "gain = -32768"),
+        (1e-7, "gain = 0.0000001"),
+    ] {
+        reject(
+            |c| c.features[0].stage = cancel(gain, "a"),
+            &["feature", shown],
+        );
+    }
+    reject(
+        |c| c.features[0].stage = cancel(1.0, "nowhere"),
+        &["feature", "nowhere"],
+    );
+    // Zero and the largest gains are legal.
+    for gain in [0.0, 32_767.99, -32_767.99] {
+        let mut c = good();
+        c.features[0].stage = cancel(gain, "a");
+        detector_build::build(&c).unwrap_or_else(|e| panic!("gain {gain}: {e}"));
+    }
 }
 
 /// A rejected configuration leaves a running detector as it was: a detector built before,

@@ -195,6 +195,45 @@ proptest! {
         }
     }
 
+    /// Self-motion cancellation is the input less `gain` times the motion's low-pass: within
+    /// its bound of the model (the low-pass's, times |gain|, plus the gain's rounding to
+    /// 2⁻¹⁶); an input that is exactly `gain` times the same low-pass cancels to within
+    /// that bound; a gain of 0 passes the input bit for bit.
+    #[test]
+    fn cancel_removes_the_predicted_part(
+        gain in -60.0f32..60.0,
+        fraction in 0.001f32..=0.45,
+        s in samples(4, 20, 300),
+    ) {
+        let rate = 5000.0;
+        let cutoff_hz = rate * fraction;
+        let cancel = |input: &str, gain| StageSpec::Cancel {
+            input: name(input),
+            motion: name("y"),
+            gain,
+            cutoff_hz,
+        };
+        let c = features_config(rate, vec![
+            ("c", cancel("x", gain)),
+            ("lp", StageSpec::LowPass { input: name("y"), cutoff_hz }),
+            ("zero", cancel("x", 0.0)),
+        ]);
+        let g = f64::from(gain).abs();
+        let mut max_y: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            max_y = max_y.max(Signal::from_bits(row[1]).to_f64().abs());
+            let bound = 2.0 * LSB + g * (LSB + max_y / 1_048_576.0) + max_y / 131_072.0;
+            prop_assert!((got[0] - want[0]).abs() <= bound,
+                "tick {}: engine {} model {} bound {:e}", t, got[0], want[0], bound);
+            let x = Signal::from_bits(row[0]).to_f64();
+            prop_assert_eq!(got[2], x, "tick {}", t);
+            // The engine's own low-pass of y, times the gain, is what it took away.
+            let predicted = f64::from(gain) * got[1];
+            prop_assert!((got[0] - (x - predicted)).abs() <= 2.0 * LSB + max_y / 131_072.0,
+                "tick {}: {} vs {} - {}", t, got[0], x, predicted);
+        }
+    }
+
     /// The short-time energy against eq. 17 with the normalized window, both shapes, windows
     /// 1..=128, inputs below 256 in magnitude, from the first tick (missing samples zero).
     #[test]

@@ -301,6 +301,8 @@ pub fn model_series(config: &Config, samples: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// - rate: 0 at an integer rate, else `2⁻⁸ max|Δx| + LSB` (its input assumed exact);
 /// - low-pass: the input's + `LSB + 2⁻²⁰ max|x|`;
 /// - high-pass: twice the input's + `LSB + 2⁻²⁰ max|x|` (the input less its low-pass);
+/// - cancel: the input's + `2 LSB + |g| (δ_m + LSB + 2⁻²⁰ max|m|) + 2⁻¹⁷ max|m|` (the
+///   motion's low-pass times the gain, the gain rounded to 2⁻¹⁶);
 /// - dot: `LSB + Σ |a| δ_b + |b| δ_a + δ_a δ_b`;
 /// - magnitude: `LSB + 2⁻¹⁵ max|m| + δ_x + δ_y`;
 /// - STE: `2 LSB + N 2⁻²³ max x² + N 2⁻²⁵ max ζ + 2 max|x| δ_x + δ_x²`.
@@ -318,6 +320,18 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
             StageSpec::Raw { input } | StageSpec::Abs { input } => d(input),
             StageSpec::LowPass { input, .. } => d(input) + LSB + m(input) / 1_048_576.0,
             StageSpec::HighPass { input, .. } => 2.0 * d(input) + LSB + m(input) / 1_048_576.0,
+            StageSpec::Cancel {
+                input,
+                motion,
+                gain,
+                ..
+            } => {
+                let g = f64::from(*gain).abs();
+                d(input)
+                    + 2.0 * LSB
+                    + g * (d(motion) + LSB + m(motion) / 1_048_576.0)
+                    + m(motion) / 131_072.0
+            }
             StageSpec::Rate { input } => {
                 if config.rate_hz.fract() == 0.0 {
                     0.0
