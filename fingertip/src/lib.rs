@@ -1,7 +1,9 @@
 //! The fingertip detector's PC tool, as a library: the simulator, the trace format,
-//! replay, scoring, plots and the CAN tools behind the `fingertip` command.
+//! replay, scoring, plots, the identification of self-motion cancellations and the CAN
+//! tools behind the `fingertip` command.
 
 pub mod can_tools;
+pub mod identify;
 pub mod plot;
 pub mod replay;
 pub mod score;

@@ -162,6 +162,22 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Identify a self-motion cancellation (the `cancel` stage) from event-free motion: the
+    /// gain and cut-off with which the low-passed commanded motion best explains a sensor.
+    Identify {
+        /// A trace of motion without events (rows with a `truth` label are left out).
+        trace: PathBuf,
+        /// The sensor channel to cancel, e.g. `force_x`.
+        #[arg(long)]
+        input: String,
+        /// The commanded motion that explains it, e.g. `acc_des_x`.
+        #[arg(long)]
+        motion: String,
+        /// The configuration whose channel scales give the gain in the detector's units
+        /// (the approach configuration when absent).
+        #[arg(long)]
+        config: Option<PathBuf>,
+    },
     /// Simulate the four runs of the paper's figure 4 and a sudden acceleration, print who
     /// was detected when, and write the figures.
     Demo {
@@ -291,6 +307,12 @@ fn run(cli: Cli) -> Result<()> {
             free_hours,
             json,
         } => evaluate(runs, seed, &config, free_hours, json.as_deref()),
+        Command::Identify {
+            trace,
+            input,
+            motion,
+            config,
+        } => identify(&trace, &input, &motion, config.as_deref()),
         Command::Demo { out } => demo(&out),
     }
 }
@@ -1025,6 +1047,68 @@ fn evaluate(
         write_atomically(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// The best cancellations of `input` by `motion` in a trace, and the best as a feature in
+/// the configuration's working units.
+fn identify(trace: &Path, input: &str, motion: &str, config: Option<&Path>) -> Result<()> {
+    let (config, config_name) = match config {
+        Some(p) => (detector_build::load(p)?, p.display().to_string()),
+        None => (
+            Config::from_toml(fingertip::APPROACH_TOML)?,
+            "configs/approach.toml".to_string(),
+        ),
+    };
+    let data = Trace::read(trace)?;
+    let fits = fingertip::identify::identify(&data, input, motion)
+        .with_context(|| trace.display().to_string())?;
+    println!(
+        "{}: {input} explained by {motion} low-passed, over {} rows (event rows left out)",
+        trace.display(),
+        data.len()
+    );
+    println!(
+        "{:>10} {:>14} {:>10} {:>14}",
+        "cutoff Hz", "gain", "explained", "residual RMS"
+    );
+    for f in fits.iter().take(5) {
+        println!(
+            "{:>10.1} {:>14} {:>9.1} % {:>14}",
+            f.cutoff_hz,
+            four_digits(f.gain),
+            f.explained * 100.0,
+            four_digits(f.residual_rms)
+        );
+    }
+    let best = fits[0];
+    let scale = |name: &str| {
+        config
+            .channels
+            .iter()
+            .find(|c| c.name == name)
+            .map(|c| c.scale)
+    };
+    match (scale(input), scale(motion)) {
+        (Some(si), Some(sm)) => println!(
+            "in {config_name}'s units:\nstage = {{ cancel = {{ input = \"{input}\", motion = \"{motion}\", gain = {:.4}, cutoff_hz = {:.1} }} }}",
+            best.gain * f64::from(si) / f64::from(sm),
+            best.cutoff_hz
+        ),
+        _ => println!(
+            "{config_name} has no channel `{input}` or `{motion}`: the gain above is in the trace's units"
+        ),
+    }
+    Ok(())
+}
+
+/// Four significant digits in the everyday range, [`fingertip::readable`] outside it.
+fn four_digits(v: f64) -> String {
+    if v != 0.0 && (1e-3..1e7).contains(&v.abs()) {
+        let decimals = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        fingertip::readable(v)
+    }
 }
 
 fn demo(out: &Path) -> Result<()> {

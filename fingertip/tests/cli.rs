@@ -180,6 +180,61 @@ fn evaluate_compares_configurations_on_the_same_runs() {
     );
 }
 
+/// `identify` finds, in simulated free motion, the fingertip's inertia on the force sensor:
+/// a gain of about minus its mass (20-45 g plus the skin) in the approach configuration's
+/// units (20 mN per m/s^2), printed as a `cancel` stage ready to paste; a channel the trace
+/// does not have is named.
+#[test]
+fn identify_finds_the_fingertip_inertia_in_free_motion() {
+    let dir = scratch("identify");
+    let trace = dir.join("free.csv");
+    let out = fingertip(&[
+        "simulate",
+        "free_motion",
+        "--duration",
+        "5",
+        "--out",
+        trace.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let path = trace.to_str().expect("utf-8");
+    let out = fingertip(&[
+        "identify",
+        path,
+        "--input",
+        "force_x",
+        "--motion",
+        "acc_des_x",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    let gain: f64 = stdout
+        .split("gain = ")
+        .nth(1)
+        .and_then(|rest| rest.split(',').next())
+        .and_then(|g| g.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no cancel stage in {stdout}"));
+    assert!((-3.0..=-1.0).contains(&gain), "gain {gain} in {stdout}");
+    assert!(
+        stdout.contains("input = \"force_x\", motion = \"acc_des_x\""),
+        "{stdout}"
+    );
+    let bad = fingertip(&[
+        "identify",
+        path,
+        "--input",
+        "force_z",
+        "--motion",
+        "acc_des_x",
+    ]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("force_z"),
+        "{}",
+        text(&bad.stderr)
+    );
+}
+
 /// The frames the firmware would send decode back to the same confirmation.
 #[test]
 fn replay_candump_decodes_to_the_same_events() {
