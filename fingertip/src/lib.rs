@@ -4,6 +4,7 @@
 
 pub mod can_tools;
 pub mod identify;
+pub mod output;
 pub mod plot;
 pub mod replay;
 pub mod score;

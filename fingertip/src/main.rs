@@ -15,6 +15,7 @@ use detector_core::Detector;
 use fingertip::can_tools::busload::{self, BusConfig};
 use fingertip::can_tools::candump::write_log_line;
 use fingertip::can_tools::decode::{self, DecodeOptions};
+use fingertip::output::{Kind, OutputPlan};
 use fingertip::plot::{self, RunPlot};
 use fingertip::replay::{self, DecisionRecord};
 use fingertip::score::{self, Outcome, ScenarioReport};
@@ -400,8 +401,8 @@ fn truth_of(trace: &Trace) -> Option<(String, f64)> {
         .and_then(|(row, event)| trace.time().get(row).map(|&t| (event.to_string(), t)))
 }
 
-/// Writes per-tick event confidences and feature values as CSV (atomically).
-fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -> Result<()> {
+/// Per-tick event confidences and feature values as CSV.
+fn confidences_csv(trace: &Trace, rec: &Recorded, config: &str) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
@@ -430,11 +431,14 @@ fn write_confidences(path: &Path, trace: &Trace, rec: &Recorded, config: &str) -
         }
         text.push('\n');
     }
-    write_atomically(path, text.as_bytes())
+    text
 }
 
-fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    fingertip::trace::write_atomically(path, bytes).with_context(|| path.display().to_string())
+/// The outputs of a command that has them, checked against each other and its inputs
+/// before any work: `(path, kind)` where given.
+fn plan_outputs(inputs: &[&Path], outputs: &[Option<(&Path, Kind)>]) -> Result<OutputPlan> {
+    let given: Vec<(&Path, Kind)> = outputs.iter().flatten().copied().collect();
+    Ok(OutputPlan::new(inputs, &given)?)
 }
 
 fn describe(d: &DecisionRecord, truth: Option<&(String, f64)>) -> String {
@@ -464,17 +468,27 @@ fn replay_cmd(
     json: bool,
     candump: Option<(PathBuf, NodeId)>,
 ) -> Result<()> {
+    let inputs: Vec<&Path> = std::iter::once(path).chain(config).collect();
+    // Staged in this order: confidences, figure, CAN log; committed together at the end.
+    let plan = plan_outputs(
+        &inputs,
+        &[
+            out.map(|p| (p, Kind::File)),
+            plot_to.map(|p| (p, Kind::Figure)),
+            candump.as_ref().map(|(p, _)| (p.as_path(), Kind::File)),
+        ],
+    )?;
+    let mut next = 0..;
     let (detector, config_name) = load_detector(config)?;
     let trace = Trace::read(path)?;
     let rec = record(&detector, &trace)?;
-    if let Some((file, node)) = candump {
-        write_candump(&file, &detector, &trace, node)?;
-    }
     let truth = truth_of(&trace);
-    if let Some(out) = out {
-        write_confidences(out, &trace, &rec, &config_name)?;
+    if out.is_some() {
+        let k = next.next().unwrap_or(0);
+        plan.write(k, confidences_csv(&trace, &rec, &config_name).as_bytes())?;
     }
-    if let Some(p) = plot_to {
+    if plot_to.is_some() {
+        let k = next.next().unwrap_or(0);
         let run = RunPlot {
             title: trace.name().to_string(),
             t: trace.time(),
@@ -482,8 +496,13 @@ fn replay_cmd(
             truth: truth.clone(),
             decisions: &rec.decisions,
         };
-        plot::write_run(p, &run)?;
+        plot::write_run(plan.staging(k), &run)?;
     }
+    if let Some((_, node)) = candump {
+        let k = next.next().unwrap_or(0);
+        plan.write(k, &candump_log(&detector, &trace, node)?)?;
+    }
+    plan.commit()?;
     if json {
         let report = serde_json::json!({
             "trace": trace.name(),
@@ -513,9 +532,9 @@ fn replay_cmd(
     Ok(())
 }
 
-/// Replays `trace` through the firmware's transmit logic and writes every frame it would
-/// send in candump log format, stamped with the trace's time.
-fn write_candump(path: &Path, detector: &Detector, trace: &Trace, node: NodeId) -> Result<()> {
+/// Replays `trace` through the firmware's transmit logic: every frame it would send, in
+/// candump log format, stamped with the trace's time.
+fn candump_log(detector: &Detector, trace: &Trace, node: NodeId) -> Result<Vec<u8>> {
     let tx = Transmitter::with_defaults(node, detector.rate_hz().round() as u32)?;
     let mut state = TxState::new();
     let status = Status {
@@ -533,8 +552,8 @@ fn write_candump(path: &Path, detector: &Detector, trace: &Trace, node: NodeId) 
             }
         }
     })?;
-    io_result.with_context(|| path.display().to_string())?;
-    write_atomically(path, &text)
+    io_result.context("the CAN log")?;
+    Ok(text)
 }
 
 fn decode_options(config: Option<&Path>, node: Option<u8>, quiet: bool) -> Result<DecodeOptions> {
@@ -555,9 +574,11 @@ fn decode_cmd(
     quiet: bool,
     plot_to: Option<&Path>,
 ) -> Result<()> {
+    let inputs: Vec<&Path> = std::iter::once(file).chain(config).collect();
+    let plan = plan_outputs(&inputs, &[plot_to.map(|p| (p, Kind::Figure))])?;
     let opts = decode_options(config, node, quiet)?;
     let log = decode::decode_file(file, &opts, &mut std::io::stdout().lock())?;
-    if let Some(p) = plot_to {
+    if plot_to.is_some() {
         let (t, series, decisions) = stream_series(&log, &opts);
         let run = RunPlot {
             title: file.display().to_string(),
@@ -566,8 +587,9 @@ fn decode_cmd(
             truth: None,
             decisions: &decisions,
         };
-        plot::write_run(p, &run)?;
+        plot::write_run(plan.staging(0), &run)?;
     }
+    plan.commit()?;
     Ok(())
 }
 
@@ -990,6 +1012,8 @@ fn evaluate(
             .collect::<Result<Vec<_>>>()?
     };
     let (detectors, names): (Vec<Detector>, Vec<String>) = loaded.into_iter().unzip();
+    let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
+    let plan = plan_outputs(&inputs, &[json.map(|p| (p, Kind::File))])?;
     if !(1..=MAX_RUNS).contains(&runs) {
         bail!("--runs = {runs} must be within 1..={MAX_RUNS} runs per scenario");
     }
@@ -1026,7 +1050,7 @@ fn evaluate(
         rayon::current_num_threads(),
         tallies.len()
     );
-    if let Some(path) = json {
+    if json.is_some() {
         let mut report = serde_json::json!({
             "runs_per_scenario": runs,
             "seed": seed,
@@ -1044,8 +1068,9 @@ fn evaluate(
                 tallies.iter().map(|(name, t)| t.json(name)).collect();
             report["configs"] = serde_json::Value::from(per_config);
         }
-        write_atomically(path, serde_json::to_string_pretty(&report)?.as_bytes())?;
+        plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
+    plan.commit()?;
     Ok(())
 }
 
@@ -1124,6 +1149,17 @@ fn demo(out: &Path) -> Result<()> {
             "Sudden acceleration while moving, 5 cm/s",
         ),
     ];
+    // Every figure, per run then the grid, each as PNG and SVG: staged, then committed
+    // together.
+    let names = runs.iter().map(|r| r.0).chain(["figure4"]);
+    let files: Vec<PathBuf> = names
+        .flat_map(|n| ["png", "svg"].map(|ext| out.join(format!("{n}.{ext}"))))
+        .collect();
+    let figures: Vec<Option<(&Path, Kind)>> = files
+        .iter()
+        .map(|f| Some((f.as_path(), Kind::Figure)))
+        .collect();
+    let plan = plan_outputs(&[], &figures)?;
     println!("fingertip demo: {config_name}, nominal Table 1 runs, event at t = 20 ms\n");
     let mut traces = Vec::new();
     let mut recs = Vec::new();
@@ -1141,6 +1177,7 @@ fn demo(out: &Path) -> Result<()> {
         traces.push((scenario, trace));
     }
     let mut plots = Vec::new();
+    let mut staged = (0..files.len()).map(|k| plan.staging(k));
     for (((scenario, trace), rec), (_, title)) in traces.iter().zip(&recs).zip(runs) {
         let truth = truth_of(trace);
         let expected = scenario
@@ -1158,17 +1195,16 @@ fn demo(out: &Path) -> Result<()> {
             truth,
             decisions: &rec.decisions,
         };
-        for ext in ["png", "svg"] {
-            let p = out.join(format!("{}.{ext}", scenario.name()));
-            plot::write_run(&p, &run)?;
+        for p in staged.by_ref().take(2) {
+            plot::write_run(p, &run)?;
         }
         plots.push(run);
     }
     let figure: Vec<RunPlot<'_>> = plots.iter().take(4).cloned().collect();
-    for ext in ["png", "svg"] {
-        let p = out.join(format!("figure4.{ext}"));
-        plot::write_grid(&p, &figure, 2, (800, 380))?;
+    for p in staged {
+        plot::write_grid(p, &figure, 2, (800, 380))?;
     }
+    plan.commit()?;
     println!(
         "\nfigures: {}/figure4.png (.svg) and one per run",
         out.display()

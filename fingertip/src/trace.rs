@@ -30,8 +30,8 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::io::{self, Write as _};
-use std::path::{Path, PathBuf};
+use std::io;
+use std::path::Path;
 
 /// The name of the time column.
 pub const TIME_COLUMN: &str = "t";
@@ -59,14 +59,8 @@ pub enum TraceError {
         source: io::Error,
     },
     /// The file could not be written; no file was left at the destination.
-    #[error("{file}: cannot write: {source}")]
-    Write {
-        /// The file.
-        file: String,
-        /// The underlying error.
-        #[source]
-        source: io::Error,
-    },
+    #[error("cannot write: {0}")]
+    Write(#[source] crate::output::OutputError),
     /// The file holds nothing but blank and comment lines.
     #[error("{file}: empty: no header row (a trace needs a header naming its columns, `t` first)")]
     NoHeader {
@@ -597,15 +591,16 @@ impl Trace {
         out
     }
 
-    /// Writes the trace to a file, atomically: the text goes to a temporary file beside
-    /// the destination, is flushed to disk, and is then renamed over the destination. On
-    /// any failure the temporary file is removed and the destination is left untouched.
+    /// Writes the trace to a file as one [`OutputPlan`](crate::output::OutputPlan) output:
+    /// checked first, staged beside the destination, then moved into place. On any failure
+    /// the staging file is removed and the destination is left untouched.
     pub fn write(&self, path: impl AsRef<Path>) -> Result<(), TraceError> {
-        let path = path.as_ref();
-        write_atomically(path, self.to_csv().as_bytes()).map_err(|source| TraceError::Write {
-            file: path.display().to_string(),
-            source,
-        })
+        use crate::output::{Kind, OutputPlan};
+        let plan =
+            OutputPlan::new(&[], &[(path.as_ref(), Kind::File)]).map_err(TraceError::Write)?;
+        plan.write(0, self.to_csv().as_bytes())
+            .map_err(TraceError::Write)?;
+        plan.commit().map_err(TraceError::Write)
     }
 
     /// The name errors are reported under (the file name for a trace that was read).
@@ -834,30 +829,6 @@ fn check_time(
         }
     }
     Ok(1.0 / period)
-}
-
-/// Writes `bytes` to a temporary file beside `path`, syncs it, and renames it to `path`,
-/// so that a failure never leaves a partial file looking complete. Every tool output goes
-/// through here.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> io::Result<()> {
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| io::Error::new(io::ErrorKind::InvalidInput, "not a file path"))?;
-    let mut tmp_name = std::ffi::OsString::from(".");
-    tmp_name.push(file_name);
-    tmp_name.push(format!(".tmp-{}", std::process::id()));
-    let tmp: PathBuf = path.with_file_name(tmp_name);
-    let result = (|| {
-        let mut f = fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        drop(f);
-        fs::rename(&tmp, path)
-    })();
-    if result.is_err() {
-        let _ = fs::remove_file(&tmp);
-    }
-    result
 }
 
 #[cfg(test)]
@@ -1113,11 +1084,11 @@ mod tests {
     fn failed_write_leaves_nothing() {
         let dir = std::env::temp_dir().join(format!("trace-fail-{}", std::process::id()));
         fs::create_dir_all(&dir).unwrap();
-        // The destination is a directory: the rename fails after the temp file was written.
+        // The destination is a directory: refused before anything is written.
         let dest = dir.join("occupied");
         fs::create_dir_all(dest.join("inner")).unwrap();
         let e = sample().write(&dest).unwrap_err();
-        assert!(e.to_string().contains("cannot write"), "{e}");
+        assert!(e.to_string().contains("is a directory"), "{e}");
         let names: Vec<_> = fs::read_dir(&dir)
             .unwrap()
             .map(|e| e.unwrap().file_name())

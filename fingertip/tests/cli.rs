@@ -235,6 +235,148 @@ fn identify_finds_the_fingertip_inertia_in_free_motion() {
     );
 }
 
+/// No output may destroy an input or another output, and a bad output is found before any
+/// work, with nothing written: each case of the class, for every command with outputs.
+#[test]
+fn outputs_never_destroy_inputs_and_are_all_or_none() {
+    let dir = scratch("outputs");
+    let trace = simulate(&dir, "contact_hard_8");
+    let original = std::fs::read(&trace).expect("trace");
+    let t = trace.to_str().expect("utf-8");
+    let d = |name: &str| dir.join(name).to_str().expect("utf-8").to_owned();
+    let link = dir.join("link.csv");
+    std::os::unix::fs::symlink(&trace, &link).expect("symlink");
+    let spelled = format!("{}/./contact_hard_8.csv", dir.display());
+    let config = format!("{}/../configs/approach.toml", env!("CARGO_MANIFEST_DIR"));
+    let config_before = std::fs::read(&config).expect("config");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["replay".into(), t.into(), "--out".into(), t.into()],
+            "input",
+        ),
+        (
+            vec!["replay".into(), t.into(), "--candump".into(), t.into()],
+            "input",
+        ),
+        (
+            vec!["replay".into(), t.into(), "--out".into(), spelled.clone()],
+            "input",
+        ),
+        (
+            vec![
+                "replay".into(),
+                t.into(),
+                "--out".into(),
+                link.to_str().expect("utf-8").into(),
+            ],
+            "input",
+        ),
+        (
+            vec![
+                "replay".into(),
+                t.into(),
+                "--config".into(),
+                config.clone(),
+                "--out".into(),
+                config.clone(),
+            ],
+            "input",
+        ),
+        (
+            vec![
+                "replay".into(),
+                t.into(),
+                "--out".into(),
+                d("a.csv"),
+                "--candump".into(),
+                d("a.csv"),
+            ],
+            "two outputs",
+        ),
+        (
+            vec![
+                "replay".into(),
+                t.into(),
+                "--out".into(),
+                d("b.csv"),
+                "--plot".into(),
+                d("b.jpg"),
+            ],
+            ".png or .svg",
+        ),
+        (
+            vec![
+                "replay".into(),
+                t.into(),
+                "--out".into(),
+                d("c.csv"),
+                "--plot".into(),
+                d("none/c.png"),
+            ],
+            "does not exist",
+        ),
+        (
+            vec![
+                "simulate".into(),
+                "contact_hard_8".into(),
+                "--out".into(),
+                d(""),
+            ],
+            "directory",
+        ),
+        (
+            vec![
+                "evaluate".into(),
+                "--runs".into(),
+                "1".into(),
+                "--config".into(),
+                config.clone(),
+                "--json".into(),
+                config.clone(),
+            ],
+            "input",
+        ),
+    ];
+    for (args, words) in &cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = fingertip(&args);
+        let err = text(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(err.contains(words), "{args:?}: {err}");
+    }
+    assert_eq!(
+        std::fs::read(&trace).expect("trace"),
+        original,
+        "the input is intact"
+    );
+    assert_eq!(std::fs::read(&config).expect("config"), config_before);
+    let mut left: Vec<String> = std::fs::read_dir(&dir)
+        .expect("dir")
+        .filter_map(Result::ok)
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    left.sort();
+    assert_eq!(
+        left,
+        ["contact_hard_8.csv", "link.csv"],
+        "nothing else written"
+    );
+    // Outputs written together; a special file is written through and stays what it is.
+    let out = fingertip(&[
+        "replay",
+        t,
+        "--out",
+        &d("conf.csv"),
+        "--plot",
+        &d("conf.svg"),
+        "--candump",
+        "/dev/null",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(dir.join("conf.csv").is_file() && dir.join("conf.svg").is_file());
+    assert!(!std::fs::metadata("/dev/null").expect("null").is_file());
+}
+
 /// The frames the firmware would send decode back to the same confirmation.
 #[test]
 fn replay_candump_decodes_to_the_same_events() {
