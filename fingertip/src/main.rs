@@ -514,10 +514,11 @@ fn replay_cmd(
         return Ok(());
     }
     println!(
-        "{} with {}: {} ticks at {} Hz",
+        "{} with {}: {} ticks, sampled at {} Hz (the detector runs at {} Hz)",
         trace.name(),
         config_name,
         trace.len(),
+        (trace.rate_hz() * 1000.0).round() / 1000.0,
         detector.rate_hz()
     );
     if let Some((event, onset)) = &truth {

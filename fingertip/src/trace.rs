@@ -228,6 +228,18 @@ pub struct Trace {
     phase: Option<Labels>,
     truth: Option<Labels>,
     metadata: Vec<(String, String)>,
+    lines: LineMap,
+}
+
+/// The file line each row was read from, for messages. Not part of the trace's data: two
+/// traces with the same rows are equal wherever their rows were read from.
+#[derive(Clone, Debug, Default)]
+struct LineMap(Vec<u32>);
+
+impl PartialEq for LineMap {
+    fn eq(&self, _: &LineMap) -> bool {
+        true
+    }
 }
 
 /// A text column (phase or truth): one label per row, stored compactly as an index into
@@ -372,6 +384,7 @@ impl Trace {
             phase: None,
             truth: None,
             metadata: Vec::new(),
+            lines: LineMap::default(),
         })
     }
 
@@ -546,7 +559,15 @@ impl Trace {
             phase,
             truth,
             metadata,
+            lines: LineMap(rows.iter().map(|r| r.0 as u32).collect()),
         })
+    }
+
+    /// The file line of row `row` (0-based): where it was read from, or, for a trace built
+    /// in memory, where it would be written without metadata (header on line 1). Every
+    /// message about a row names its line.
+    pub fn line_of(&self, row: usize) -> usize {
+        self.lines.0.get(row).map_or(row + 2, |&l| l as usize)
     }
 
     /// Writes the trace as CSV text: metadata comments, header, rows.
