@@ -49,7 +49,7 @@ pub const TIME_STEP_TOLERANCE: f64 = 0.01;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum TraceError {
-    /// The file could not be read (missing, unreadable, not UTF-8).
+    /// The file could not be read (missing, unreadable).
     #[error("{file}: cannot read: {source}")]
     Read {
         /// The file.
@@ -57,6 +57,18 @@ pub enum TraceError {
         /// The underlying error.
         #[source]
         source: io::Error,
+    },
+    /// The file is not UTF-8 text.
+    #[error("{file}: line {line}, byte {offset}: not UTF-8 text{hint}")]
+    NotUtf8 {
+        /// The file.
+        file: String,
+        /// The line of the first byte that is not UTF-8 (1-based).
+        line: usize,
+        /// Its offset from the start of the file (0-based).
+        offset: usize,
+        /// What the file looks like instead, if that can be told.
+        hint: &'static str,
     },
     /// The file could not be written; no file was left at the destination.
     #[error("cannot write: {0}")]
@@ -164,12 +176,14 @@ pub enum TraceError {
         column: usize,
         /// The column's name.
         name: String,
-        /// The cell as written.
+        /// The cell as written (shortened if long).
         cell: String,
     },
     /// Time does not increase from one row to the next.
     #[error(
-        "{file}: line {line}, column {column} `t`: time {t} s does not increase (previous row: {previous} s)"
+        "{file}: line {line}, column {column} `t`: time {} s does not increase (previous row: {} s)",
+        crate::readable(*t),
+        crate::readable(*previous)
     )]
     TimeNotIncreasing {
         /// The file.
@@ -185,7 +199,9 @@ pub enum TraceError {
     },
     /// A time step differs from the mean period by more than [`TIME_STEP_TOLERANCE`].
     #[error(
-        "{file}: line {line}, column {column} `t`: time step {step} s differs from the trace's mean period {period} s by more than 1% (time must be uniform)"
+        "{file}: line {line}, column {column} `t`: time step {} s differs from the trace's mean period {} s by more than 1% (time must be uniform)",
+        crate::readable(*step),
+        crate::readable(*period)
     )]
     TimeNotUniform {
         /// The file.
@@ -416,7 +432,7 @@ impl Trace {
             return Err(TraceError::InvalidText {
                 file: self.name.clone(),
                 what: "metadata key",
-                text: key.escape_debug().to_string(),
+                text: shorten(key),
                 reason: "a key is non-empty and holds no blank, `#` first, `:` or `,`",
             });
         }
@@ -424,7 +440,7 @@ impl Trace {
             return Err(TraceError::InvalidText {
                 file: self.name.clone(),
                 what: "metadata value",
-                text: value.escape_debug().to_string(),
+                text: shorten(value),
                 reason: "a value holds no line break",
             });
         }
@@ -437,11 +453,36 @@ impl Trace {
     pub fn read(path: impl AsRef<Path>) -> Result<Trace, TraceError> {
         let path = path.as_ref();
         let file = path.display().to_string();
-        let text = fs::read_to_string(path).map_err(|source| TraceError::Read {
+        let bytes = fs::read(path).map_err(|source| TraceError::Read {
             file: file.clone(),
             source,
         })?;
-        Trace::parse(&text, &file)
+        let line_at = |offset: usize| 1 + bytes[..offset].iter().filter(|&&b| b == b'\n').count();
+        // No text trace holds a NUL byte (valid UTF-8 as it is). UTF-16 text shows a
+        // byte-order mark, or ASCII with a NUL beside every character.
+        let head = &bytes[..bytes.len().min(64)];
+        let nul_at = |parity: usize| head.iter().skip(parity).step_by(2).all(|&b| b == 0);
+        let utf16 = bytes.starts_with(&[0xff, 0xfe])
+            || bytes.starts_with(&[0xfe, 0xff])
+            || (head.len() >= 8 && (nul_at(0) || nul_at(1)));
+        const UTF16: &str = " (it looks like UTF-16, which is not supported: save it as UTF-8)";
+        const OTHER: &str = " (a binary file, or text in another encoding: save it as UTF-8)";
+        let hint = if utf16 { UTF16 } else { OTHER };
+        let bad = match std::str::from_utf8(&bytes) {
+            Ok(text) => text.find('\0'),
+            Err(e) => Some(e.valid_up_to()),
+        };
+        if let Some(offset) = bad.map(|o| if utf16 { 0 } else { o }) {
+            return Err(TraceError::NotUtf8 {
+                file,
+                line: line_at(offset),
+                offset,
+                hint,
+            });
+        }
+        // Checked just above.
+        let text = std::str::from_utf8(&bytes).unwrap_or_default();
+        Trace::parse(text, &file)
     }
 
     /// Parses trace text; `name` (usually the file name) prefixes every error message.
@@ -722,7 +763,7 @@ impl Trace {
                 return Err(TraceError::InvalidText {
                     file: self.name.clone(),
                     what,
-                    text: label.escape_debug().to_string(),
+                    text: shorten(label),
                     reason: "a label holds no comma or line break and no blank at either end",
                 });
             }
@@ -741,7 +782,7 @@ fn check_column_name(file: &str, name: &str) -> Result<(), TraceError> {
         return Err(TraceError::InvalidText {
             file: file.to_string(),
             what: "channel name",
-            text: name.escape_debug().to_string(),
+            text: shorten(name),
             reason: "a name is non-empty, holds no comma or line break, does not start with `#` and has no blank at either end",
         });
     }
@@ -772,7 +813,7 @@ fn parse_number(
             line,
             column: col + 1,
             name: name.to_string(),
-            cell: cell.to_string(),
+            cell: shorten(cell),
         }),
         Err(_) => Err(TraceError::NotANumber {
             file: file.to_string(),
@@ -1115,6 +1156,40 @@ mod tests {
             .map(|e| e.unwrap().file_name())
             .collect();
         assert_eq!(names, ["occupied"], "temporary file removed");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Files that are not UTF-8 text are refused with the line and byte where the text
+    /// stops, and UTF-16 is named; huge cells and numbers are shown short.
+    #[test]
+    fn encodings_and_huge_values_give_short_clear_messages() {
+        let dir = std::env::temp_dir().join(format!("trace-enc-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let good = "t,x\n0,1\n0.001,2\n";
+        let utf16le: Vec<u8> = good.encode_utf16().flat_map(u16::to_le_bytes).collect();
+        let with_bom: Vec<u8> = [0xff, 0xfe].into_iter().chain(utf16le.clone()).collect();
+        let utf16be: Vec<u8> = good.encode_utf16().flat_map(u16::to_be_bytes).collect();
+        let latin1: Vec<u8> = b"t,x\n0,1\n0.001,caf\xe9\n".to_vec();
+        let png: Vec<u8> = b"\x89PNG\r\n\x1a\n\0\0\0\rIHDR".to_vec();
+        for (bytes, words) in [
+            (&utf16le, &["line 1", "byte 0", "UTF-16"][..]),
+            (&with_bom, &["line 1", "byte 0", "UTF-16"][..]),
+            (&utf16be, &["line 1", "byte 0", "UTF-16"][..]),
+            (&latin1, &["line 3", "byte 17", "another encoding"][..]),
+            (&png, &["line 1", "byte 0", "binary"][..]),
+        ] {
+            let path = dir.join("bad.csv");
+            fs::write(&path, bytes).unwrap();
+            let m = Trace::read(&path).unwrap_err().to_string();
+            for w in words {
+                assert!(m.contains(w), "{m:?} lacks {w:?}");
+            }
+        }
+        let huge_cell = format!("t,x\n0,1\n0.001,{}\n", "9".repeat(10_000_000) + "x");
+        let m = parse(&huge_cell).unwrap_err().to_string();
+        assert!(m.len() < 200 && m.contains("line 3"), "{} bytes", m.len());
+        let m = parse("t,x\n1e300,1\n0,2\n").unwrap_err().to_string();
+        assert!(m.contains("1e300") && m.len() < 200, "{m}");
         fs::remove_dir_all(&dir).unwrap();
     }
 
