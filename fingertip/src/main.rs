@@ -711,13 +711,18 @@ enum Job {
 }
 
 impl Job {
-    /// Every job: `runs` of each single-event scenario in order, then `free_runs` stretches
-    /// of free motion.
-    fn all(runs: usize, free_runs: usize) -> Vec<Job> {
-        (0..Scenario::single_event().len())
-            .flat_map(|index| (0..runs).map(move |k| Job::Single { index, k }))
-            .chain((0..free_runs).map(|k| Job::FreeMotion { k }))
-            .collect()
+    /// Job `i` of an evaluation of `runs` per single-event scenario, in order, then the
+    /// stretches of free motion: jobs are made as they run, never listed up front.
+    fn at(i: usize, runs: usize) -> Job {
+        let single = Scenario::single_event().len() * runs;
+        if i < single {
+            Job::Single {
+                index: i / runs,
+                k: i % runs,
+            }
+        } else {
+            Job::FreeMotion { k: i - single }
+        }
     }
 
     fn scenario(self) -> Scenario {
@@ -786,18 +791,24 @@ fn run_job(detectors: &[Detector], job: Job, base_seed: u64) -> Result<JobResult
     })
 }
 
-/// Runs every job on all cores behind a progress bar; the results in job order and the
-/// wall time taken (s).
-fn run_jobs(detectors: &[Detector], jobs: &[Job], base_seed: u64) -> Result<(Vec<JobResult>, f64)> {
-    let bar = ProgressBar::new(jobs.len() as u64).with_style(
+/// Runs `runs` of every single-event scenario and `free_runs` stretches of free motion on
+/// all cores behind a progress bar; the results in job order and the wall time taken (s).
+fn run_jobs(
+    detectors: &[Detector],
+    runs: usize,
+    free_runs: usize,
+    base_seed: u64,
+) -> Result<(Vec<JobResult>, f64)> {
+    let jobs = Scenario::single_event().len() * runs + free_runs;
+    let bar = ProgressBar::new(jobs as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")?
             .progress_chars("=> "),
     );
     let started = Instant::now();
-    let results: Result<Vec<JobResult>> = jobs
-        .par_iter()
-        .map(|&job| {
-            let result = run_job(detectors, job, base_seed);
+    let results: Result<Vec<JobResult>> = (0..jobs)
+        .into_par_iter()
+        .map(|i| {
+            let result = run_job(detectors, Job::at(i, runs), base_seed);
             bar.inc(1);
             result
         })
@@ -1025,7 +1036,7 @@ fn evaluate(
         );
     }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
-    let (results, wall) = run_jobs(&detectors, &Job::all(runs, free_runs), seed)?;
+    let (results, wall) = run_jobs(&detectors, runs, free_runs, seed)?;
     let tallies: Vec<(String, Tally)> = names
         .into_iter()
         .enumerate()
@@ -1211,4 +1222,33 @@ fn demo(out: &Path) -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Jobs made one by one are every scenario's runs in order, then free motion, each
+    /// with its own seed: the order and seeds an evaluation reports.
+    #[test]
+    fn jobs_are_made_in_order_without_a_list() {
+        let runs = 3;
+        let singles = Scenario::single_event().len() * runs;
+        let jobs: Vec<Job> = (0..singles + 2).map(|i| Job::at(i, runs)).collect();
+        for (i, job) in jobs.iter().take(singles).enumerate() {
+            assert!(
+                matches!(*job, Job::Single { index, k } if index == i / runs && k == i % runs),
+                "{i}: {job:?}"
+            );
+        }
+        assert!(matches!(jobs[singles], Job::FreeMotion { k: 0 }));
+        assert!(matches!(jobs[singles + 1], Job::FreeMotion { k: 1 }));
+        let mut seeds: Vec<u64> = jobs.iter().map(|j| j.seed(1)).collect();
+        seeds.sort_unstable();
+        seeds.dedup();
+        assert_eq!(seeds.len(), jobs.len(), "every run its own seed");
+        // The largest evaluation allowed is made as it runs: its last job is reachable.
+        let last = Scenario::single_event().len() * MAX_RUNS;
+        assert!(matches!(Job::at(last, MAX_RUNS), Job::FreeMotion { k: 0 }));
+    }
 }
