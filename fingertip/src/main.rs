@@ -20,7 +20,7 @@ use fingertip::plot::{self, RunPlot};
 use fingertip::replay::{self, DecisionRecord};
 use fingertip::score::{self, Outcome, ScenarioReport};
 use fingertip::sim::{self, Scenario, SimOptions};
-use fingertip::trace::Trace;
+use fingertip::trace::{Trace, TraceReader};
 use fingertip_can::{NodeId, Status, Transmitter, TxState};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
@@ -366,32 +366,24 @@ fn simulate(
     Ok(())
 }
 
-/// A replay with every tick's confidences kept, for plots and CSV output.
+/// A replay of a simulated run with every tick's confidences kept, for the demo's figures.
 struct Recorded {
     decisions: Vec<DecisionRecord>,
     /// Per event of the configuration: name and confidence per tick.
     series: Series,
-    /// Per feature of the configuration: name and value per tick.
-    features: Series,
 }
 
 fn record(detector: &Detector, trace: &Trace) -> Result<Recorded> {
     let names: Vec<String> = detector.events().iter().map(|n| n.to_string()).collect();
-    let feature_names: Vec<String> = detector.features().iter().map(|n| n.to_string()).collect();
     let mut values = vec![Vec::with_capacity(trace.len()); names.len()];
-    let mut features = vec![Vec::with_capacity(trace.len()); feature_names.len()];
-    let decisions = replay::replay(detector, trace, |_, state, out| {
+    let decisions = replay::replay(detector, trace, |_, _, out| {
         for (v, c) in values.iter_mut().zip(out.confidences.iter()) {
             v.push(c.to_f64());
-        }
-        for (k, f) in features.iter_mut().enumerate() {
-            f.push(state.feature(k).map_or(f64::NAN, |x| x.to_f64()));
         }
     })?;
     Ok(Recorded {
         decisions,
         series: names.into_iter().zip(values).collect(),
-        features: feature_names.into_iter().zip(features).collect(),
     })
 }
 
@@ -399,39 +391,6 @@ fn truth_of(trace: &Trace) -> Option<(String, f64)> {
     trace
         .truth_onset()
         .and_then(|(row, event)| trace.time().get(row).map(|&t| (event.to_string(), t)))
-}
-
-/// Per-tick event confidences and feature values as CSV.
-fn confidences_csv(trace: &Trace, rec: &Recorded, config: &str) -> String {
-    let mut text = String::new();
-    let _ = writeln!(
-        text,
-        "# fingertip replay of {} with {}",
-        trace.name(),
-        config
-    );
-    let _ = writeln!(
-        text,
-        "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit"
-    );
-    let header: Vec<String> = rec
-        .series
-        .iter()
-        .map(|(n, _)| n.clone())
-        .chain(rec.features.iter().map(|(n, _)| format!("feature:{n}")))
-        .collect();
-    let _ = writeln!(text, "t,{}", header.join(","));
-    for (k, t) in trace.time().iter().enumerate() {
-        let _ = write!(text, "{t:.6}");
-        for (_, v) in &rec.series {
-            let _ = write!(text, ",{:.5}", v.get(k).copied().unwrap_or(0.0));
-        }
-        for (_, v) in &rec.features {
-            let _ = write!(text, ",{:.6}", v.get(k).copied().unwrap_or(0.0));
-        }
-        text.push('\n');
-    }
-    text
 }
 
 /// The outputs of a command that has them, checked against each other and its inputs
@@ -479,82 +438,272 @@ fn replay_cmd(
         ],
     )?;
     let mut next = 0..;
+    let mut staged = |given: bool| given.then(|| next.next().unwrap_or(0));
+    let (out_k, plot_k, can_k) = (
+        staged(out.is_some()),
+        staged(plot_to.is_some()),
+        staged(candump.is_some()),
+    );
     let (detector, config_name) = load_detector(config)?;
-    let trace = Trace::read(path)?;
-    let rec = record(&detector, &trace)?;
-    let truth = truth_of(&trace);
-    if out.is_some() {
-        let k = next.next().unwrap_or(0);
-        plan.write(k, confidences_csv(&trace, &rec, &config_name).as_bytes())?;
+    let reader = TraceReader::open(path)?;
+    let name = reader.name().to_string();
+    let writer = |k: usize| -> Result<std::io::BufWriter<std::fs::File>> {
+        let p = plan.staging(k);
+        let f = std::fs::File::create(p).with_context(|| p.display().to_string())?;
+        Ok(std::io::BufWriter::with_capacity(1 << 16, f))
+    };
+    let mut csv = match out_k {
+        Some(k) => Some(ConfidenceCsv::start(
+            writer(k)?,
+            &detector,
+            &name,
+            &config_name,
+        )?),
+        None => None,
+    };
+    let mut can = match (can_k, &candump) {
+        (Some(k), Some((_, node))) => Some(CanLog::start(writer(k)?, &detector, *node)?),
+        _ => None,
+    };
+    let mut figure = plot_to.map(|_| Decimated::new(detector.events(), PLOT_POINTS));
+    let mut failed: Option<std::io::Error> = None;
+    let streamed = replay::replay_stream(&detector, reader, |t, row, state, output| {
+        if failed.is_some() {
+            return;
+        }
+        let written = csv
+            .as_mut()
+            .map_or(Ok(()), |w| w.row(t, state, output))
+            .and_then(|()| can.as_mut().map_or(Ok(()), |w| w.tick(t, row, output)));
+        if let Err(e) = written {
+            failed = Some(e);
+        }
+        if let Some(f) = figure.as_mut() {
+            f.push(t, output);
+        }
+    })?;
+    if let Some(e) = failed {
+        return Err(e).context("writing the outputs");
     }
-    if plot_to.is_some() {
-        let k = next.next().unwrap_or(0);
+    for w in [
+        csv.map(ConfidenceCsv::into_inner),
+        can.map(CanLog::into_inner),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        w.into_inner()
+            .map_err(|e| e.into_error())
+            .context("writing the outputs")?;
+    }
+    let truth = streamed.truth.clone();
+    if let (Some(k), Some(f)) = (plot_k, figure) {
+        let (t, series) = f.finish();
         let run = RunPlot {
-            title: trace.name().to_string(),
-            t: trace.time(),
-            series: rec.series.clone(),
+            title: name.clone(),
+            t: &t,
+            series,
             truth: truth.clone(),
-            decisions: &rec.decisions,
+            decisions: &streamed.decisions,
         };
         plot::write_run(plan.staging(k), &run)?;
-    }
-    if let Some((_, node)) = candump {
-        let k = next.next().unwrap_or(0);
-        plan.write(k, &candump_log(&detector, &trace, node)?)?;
     }
     plan.commit()?;
     if json {
         let report = serde_json::json!({
-            "trace": trace.name(),
+            "trace": name,
             "config": config_name,
             "truth": truth.as_ref().map(|(e, t)| serde_json::json!({"event": e, "onset_s": t})),
-            "events": rec.decisions,
+            "events": streamed.decisions,
         });
         println!("{report}");
         return Ok(());
     }
     println!(
-        "{} with {}: {} ticks, sampled at {} Hz (the detector runs at {} Hz)",
-        trace.name(),
-        config_name,
-        trace.len(),
-        (trace.rate_hz() * 1000.0).round() / 1000.0,
+        "{name} with {config_name}: {} ticks, sampled at {} Hz (the detector runs at {} Hz)",
+        streamed.rows,
+        (streamed.rate_hz * 1000.0).round() / 1000.0,
         detector.rate_hz()
     );
     if let Some((event, onset)) = &truth {
         println!("true event: {event} at {:.2} ms", onset * 1e3);
     }
-    if rec.decisions.is_empty() {
+    if streamed.decisions.is_empty() {
         println!("no level raised");
     }
-    for d in &rec.decisions {
+    for d in &streamed.decisions {
         println!("{}", describe(d, truth.as_ref()));
     }
     Ok(())
 }
 
-/// Replays `trace` through the firmware's transmit logic: every frame it would send, in
-/// candump log format, stamped with the trace's time.
-fn candump_log(detector: &Detector, trace: &Trace, node: NodeId) -> Result<Vec<u8>> {
-    let tx = Transmitter::with_defaults(node, detector.rate_hz().round() as u32)?;
-    let mut state = TxState::new();
-    let status = Status {
-        tick_rate_hz: detector.rate_hz().round() as u16,
-        ..Status::default()
-    };
-    let mut text: Vec<u8> = Vec::new();
-    let t = trace.time();
-    let mut io_result = Ok(());
-    replay::replay(detector, trace, |row, _, out| {
-        let stamp = std::time::Duration::from_secs_f64(t.get(row).copied().unwrap_or(0.0).max(0.0));
-        for frame in tx.tick(&mut state, row as u32, out, &status) {
-            if io_result.is_ok() {
-                io_result = write_log_line(&mut text, stamp, "can0", &frame);
-            }
+/// Points a replay's figure keeps per event, however long the trace.
+const PLOT_POINTS: usize = 4000;
+
+/// Per-tick event confidences and feature values as CSV, written row by row.
+struct ConfidenceCsv<W: std::io::Write> {
+    out: W,
+    events: usize,
+    features: usize,
+}
+
+impl<W: std::io::Write> ConfidenceCsv<W> {
+    fn start(mut out: W, detector: &Detector, trace: &str, config: &str) -> std::io::Result<Self> {
+        writeln!(out, "# fingertip replay of {trace} with {config}")?;
+        writeln!(
+            out,
+            "# event columns: confidence in [0, 1]; feature columns (feature:NAME): value in the feature's unit"
+        )?;
+        let header: Vec<String> = detector
+            .events()
+            .iter()
+            .map(|n| n.to_string())
+            .chain(detector.features().iter().map(|n| format!("feature:{n}")))
+            .collect();
+        writeln!(out, "t,{}", header.join(","))?;
+        Ok(ConfidenceCsv {
+            out,
+            events: detector.events().len(),
+            features: detector.features().len(),
+        })
+    }
+
+    fn row(
+        &mut self,
+        t: f64,
+        state: &detector_core::State,
+        output: &detector_core::Output,
+    ) -> std::io::Result<()> {
+        write!(self.out, "{t:.6}")?;
+        for c in output.confidences.iter().take(self.events) {
+            write!(self.out, ",{:.5}", c.to_f64())?;
         }
-    })?;
-    io_result.context("the CAN log")?;
-    Ok(text)
+        for k in 0..self.features {
+            write!(
+                self.out,
+                ",{:.6}",
+                state.feature(k).map_or(0.0, |x| x.to_f64())
+            )?;
+        }
+        writeln!(self.out)
+    }
+
+    fn into_inner(self) -> W {
+        self.out
+    }
+}
+
+/// The frames the firmware's transmit logic would send, in candump log format, stamped
+/// with the trace's time, written tick by tick.
+struct CanLog<W: std::io::Write> {
+    out: W,
+    tx: Transmitter,
+    state: TxState,
+    status: Status,
+}
+
+impl<W: std::io::Write> CanLog<W> {
+    fn start(out: W, detector: &Detector, node: NodeId) -> Result<Self> {
+        Ok(CanLog {
+            out,
+            tx: Transmitter::with_defaults(node, detector.rate_hz().round() as u32)?,
+            state: TxState::new(),
+            status: Status {
+                tick_rate_hz: detector.rate_hz().round() as u16,
+                ..Status::default()
+            },
+        })
+    }
+
+    fn tick(&mut self, t: f64, row: usize, output: &detector_core::Output) -> std::io::Result<()> {
+        let stamp = std::time::Duration::from_secs_f64(t.max(0.0));
+        for frame in self
+            .tx
+            .tick(&mut self.state, row as u32, output, &self.status)
+        {
+            write_log_line(&mut self.out, stamp, "can0", &frame)?;
+        }
+        Ok(())
+    }
+
+    fn into_inner(self) -> W {
+        self.out
+    }
+}
+
+/// Event confidences kept for a figure of a trace of any length: at most about `points`
+/// per event, each the highest confidence of the ticks it stands for (a short peak
+/// stays visible), their time the first of those ticks.
+struct Decimated {
+    names: Vec<String>,
+    points: usize,
+    /// Ticks per kept point (a power of two).
+    stride: usize,
+    t: Vec<f64>,
+    series: Vec<Vec<f64>>,
+    /// The point being gathered: its time, ticks so far and running maxima.
+    open: Option<(f64, usize)>,
+    peak: Vec<f64>,
+}
+
+impl Decimated {
+    fn new(names: &[detector_core::Name], points: usize) -> Decimated {
+        Decimated {
+            names: names.iter().map(|n| n.to_string()).collect(),
+            points: points.max(2),
+            stride: 1,
+            t: Vec::new(),
+            series: vec![Vec::new(); names.len()],
+            open: None,
+            peak: vec![0.0; names.len()],
+        }
+    }
+
+    fn push(&mut self, t: f64, output: &detector_core::Output) {
+        let (start, n) = self.open.get_or_insert((t, 0));
+        let start = *start;
+        *n += 1;
+        let n = *n;
+        for (p, c) in self.peak.iter_mut().zip(output.confidences.iter()) {
+            *p = if n == 1 {
+                c.to_f64()
+            } else {
+                p.max(c.to_f64())
+            };
+        }
+        if n == self.stride {
+            self.close(start);
+        }
+        if self.t.len() >= 2 * self.points {
+            self.halve();
+        }
+    }
+
+    fn close(&mut self, start: f64) {
+        self.t.push(start);
+        for (s, p) in self.series.iter_mut().zip(&self.peak) {
+            s.push(*p);
+        }
+        self.open = None;
+    }
+
+    /// Merges neighbouring points pairwise: half the points, twice the stride.
+    fn halve(&mut self) {
+        let pairs = self.t.len() / 2;
+        self.t = (0..pairs).map(|i| self.t[2 * i]).collect();
+        for s in &mut self.series {
+            *s = (0..pairs).map(|i| s[2 * i].max(s[2 * i + 1])).collect();
+        }
+        self.stride *= 2;
+    }
+
+    /// The kept times and each event's series.
+    fn finish(mut self) -> (Vec<f64>, Series) {
+        if let Some((start, _)) = self.open {
+            self.close(start);
+        }
+        (self.t, self.names.into_iter().zip(self.series).collect())
+    }
 }
 
 fn decode_options(config: Option<&Path>, node: Option<u8>, quiet: bool) -> Result<DecodeOptions> {

@@ -81,7 +81,7 @@ pub fn write_grid(
             rows,
             columns,
         )
-        .map_err(|e| e.to_string()),
+        .map_err(bitmap_message),
         Some("svg") => draw_grid(
             &SVGBackend::new(path, size).into_drawing_area(),
             runs,
@@ -95,6 +95,22 @@ pub fn write_grid(
         path: shown,
         message,
     })
+}
+
+/// What went wrong writing a PNG, as a person reads it (the backend's own text is its
+/// debug form).
+fn bitmap_message(e: DrawingAreaErrorKind<plotters_bitmap::BitMapBackendError>) -> String {
+    use plotters_bitmap::BitMapBackendError as B;
+    match e {
+        DrawingAreaErrorKind::BackendError(plotters_backend::DrawingErrorKind::DrawingError(b)) => {
+            match b {
+                B::IOError(io) => io.to_string(),
+                B::ImageError(image) => image.to_string(),
+                B::InvalidBuffer => "the image buffer has the wrong size".to_string(),
+            }
+        }
+        other => other.to_string(),
+    }
 }
 
 /// Writes one run to `path`.
@@ -196,4 +212,22 @@ fn draw_run<DB: DrawingBackend>(
         .label_font(("sans-serif", 13))
         .draw()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod message_tests {
+    use super::*;
+
+    /// A PNG that cannot be written says why in words, not as the backend's debug form.
+    #[test]
+    fn png_write_errors_read_as_words() {
+        let io = std::io::Error::new(std::io::ErrorKind::StorageFull, "no space left on device");
+        let e =
+            DrawingAreaErrorKind::BackendError(plotters_backend::DrawingErrorKind::DrawingError(
+                plotters_bitmap::BitMapBackendError::IOError(io),
+            ));
+        let m = bitmap_message(e);
+        assert_eq!(m, "no space left on device");
+        assert!(!m.contains("IOError") && !m.contains("Os {"));
+    }
 }

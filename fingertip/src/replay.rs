@@ -1,8 +1,8 @@
 //! Runs the fixed-point detector — the same code as on the chip — over a trace.
 
-use detector_core::{Detector, Inputs, Level, Output, State, Tick};
+use detector_core::{Detector, Inputs, Level, Output, PhaseId, State, Tick};
 
-use crate::trace::Trace;
+use crate::trace::{Trace, TraceError, TraceReader};
 
 /// A level raised during a replay, with times in seconds of the trace's `t` column.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -113,36 +113,84 @@ fn listed(names: &[detector_core::Name]) -> String {
         .join(", ")
 }
 
-/// Checks a trace's `truth` column against the detector's events: every label names one
-/// of them, and at most one event is labelled.
-fn check_truth(detector: &Detector, trace: &Trace) -> Result<(), ReplayError> {
-    let Some(truth) = trace.truth() else {
-        return Ok(());
-    };
-    let mut first: Option<&str> = None;
-    for (row, label) in truth.iter().enumerate() {
-        if label.is_empty() || first == Some(label.as_str()) {
-            continue;
+/// The rules every row of a replayed trace must follow, checked as it comes: its phase is
+/// one of the configuration's, its truth label one of the configuration's events, and at
+/// most one event is labelled. Remembers the truth's onset.
+struct RowRules<'d> {
+    detector: &'d Detector,
+    trace: String,
+    /// The last phase label seen and its id (phases change seldom).
+    phase: Option<(String, PhaseId)>,
+    /// The labelled event and the row it starts on.
+    truth: Option<(String, usize)>,
+}
+
+impl<'d> RowRules<'d> {
+    fn new(detector: &'d Detector, trace: &str) -> RowRules<'d> {
+        RowRules {
+            detector,
+            trace: trace.to_string(),
+            phase: None,
+            truth: None,
         }
-        if detector.event(label).is_none() {
-            return Err(ReplayError::UnknownTruth {
-                trace: trace.name().to_string(),
-                line: trace.line_of(row),
-                event: label.clone(),
-                have: listed(detector.events()),
-            });
+    }
+
+    /// The phase named on the row at `line`.
+    fn phase(&mut self, label: &str, line: usize) -> Result<PhaseId, ReplayError> {
+        if let Some((last, id)) = &self.phase
+            && last == label
+        {
+            return Ok(*id);
         }
-        match first {
-            None => first = Some(label),
-            Some(f) => {
-                return Err(ReplayError::SeveralTruths {
-                    trace: trace.name().to_string(),
-                    line: trace.line_of(row),
-                    first: f.to_string(),
-                    second: label.clone(),
-                });
+        let id = self
+            .detector
+            .phase(label)
+            .ok_or_else(|| ReplayError::UnknownPhase {
+                trace: self.trace.clone(),
+                line,
+                phase: label.to_string(),
+                have: listed(self.detector.phases()),
+            })?;
+        self.phase = Some((label.to_string(), id));
+        Ok(id)
+    }
+
+    /// The truth label of row `row` at `line`.
+    fn truth(&mut self, label: &str, row: usize, line: usize) -> Result<(), ReplayError> {
+        if label.is_empty() {
+            return Ok(());
+        }
+        match &self.truth {
+            Some((first, _)) if first == label => Ok(()),
+            Some((first, _)) => Err(ReplayError::SeveralTruths {
+                trace: self.trace.clone(),
+                line,
+                first: first.clone(),
+                second: label.to_string(),
+            }),
+            None if self.detector.event(label).is_none() => Err(ReplayError::UnknownTruth {
+                trace: self.trace.clone(),
+                line,
+                event: label.to_string(),
+                have: listed(self.detector.events()),
+            }),
+            None => {
+                self.truth = Some((label.to_string(), row));
+                Ok(())
             }
         }
+    }
+}
+
+/// The detector's rate when `rate_hz` is within [`RATE_TOLERANCE`] of it.
+fn check_rate(detector: &Detector, trace: &str, rate_hz: f64) -> Result<(), ReplayError> {
+    let config_hz = detector.rate_hz();
+    if (rate_hz - f64::from(config_hz)).abs() > RATE_TOLERANCE * f64::from(config_hz) {
+        return Err(ReplayError::RateMismatch {
+            trace: trace.to_string(),
+            trace_hz: rate_hz,
+            config_hz,
+        });
     }
     Ok(())
 }
@@ -168,61 +216,213 @@ pub fn channel_columns<'t>(
 }
 
 /// Replays `trace` through `detector`, calling `each_tick(row, &state, &output)` after every
-/// tick,
-/// and returns every level raised. The trace is checked first (channels, rate, phases);
-/// on error nothing has run.
+/// tick, and returns every level raised. The channels and the rate are checked first,
+/// each row's phase and truth as it comes.
 pub fn replay(
     detector: &Detector,
     trace: &Trace,
     mut each_tick: impl FnMut(usize, &State, &Output),
 ) -> Result<Vec<DecisionRecord>, ReplayError> {
-    let name = trace.name().to_string();
     let columns = channel_columns(detector, trace)?;
-    let config_hz = detector.rate_hz();
-    if (trace.rate_hz() - f64::from(config_hz)).abs() > RATE_TOLERANCE * f64::from(config_hz) {
-        return Err(ReplayError::RateMismatch {
-            trace: name,
-            trace_hz: trace.rate_hz(),
-            config_hz,
-        });
-    }
-    let phases = match trace.phase() {
-        Some(names) => {
-            let mut ids = Vec::with_capacity(names.len());
-            for (row, p) in names.iter().enumerate() {
-                match detector.phase(p) {
-                    Some(id) => ids.push(id),
-                    None => {
-                        return Err(ReplayError::UnknownPhase {
-                            trace: name,
-                            line: trace.line_of(row),
-                            phase: p.clone(),
-                            have: listed(detector.phases()),
-                        });
-                    }
-                }
-            }
-            Some(ids)
-        }
-        None => None,
-    };
-    check_truth(detector, trace)?;
-
+    check_rate(detector, trace.name(), trace.rate_hz())?;
+    let mut rules = RowRules::new(detector, trace.name());
     let t = trace.time();
-    let time_of = |tick: Tick| t.get(tick as usize).copied().unwrap_or(f64::NAN);
-    let mut state = detector.new_state();
-    let mut inputs = Inputs::default();
-    let mut records = Vec::new();
+    let mut ticker = Ticker::new(detector);
     for row in 0..t.len() {
-        if let Some(p) = phases.as_ref().and_then(|p| p.get(row)) {
-            detector.set_phase(&mut state, *p);
+        let line = trace.line_of(row);
+        if let Some(p) = trace.phase().and_then(|p| p.get(row)) {
+            let id = rules.phase(p, line)?;
+            detector.set_phase(&mut ticker.state, id);
         }
-        for (k, (sample, column)) in inputs.samples.iter_mut().zip(&columns).enumerate() {
-            *sample = detector.sample_from_si(k, column.get(row).copied().unwrap_or(0.0));
+        if let Some(label) = trace.truth().and_then(|l| l.get(row)) {
+            rules.truth(label, row, line)?;
         }
-        let out = detector.tick(&mut state, row as Tick, &inputs);
+        let out = ticker.tick(
+            detector,
+            row,
+            |k| columns.get(k).and_then(|c| c.get(row)).copied(),
+            |tick| t.get(tick as usize).copied().unwrap_or(f64::NAN),
+        );
+        each_tick(row, &ticker.state, &out);
+    }
+    Ok(ticker.records)
+}
+
+/// What a streamed replay found, beside what it handed out tick by tick.
+#[derive(Debug)]
+pub struct Streamed {
+    /// Every level raised.
+    pub decisions: Vec<DecisionRecord>,
+    /// Rows replayed.
+    pub rows: usize,
+    /// The trace's rate over all its rows (Hz).
+    pub rate_hz: f64,
+    /// The labelled event and its onset (s), if any.
+    pub truth: Option<(String, f64)>,
+}
+
+/// Replays a trace read row by row, for recordings of any length: nothing but the levels
+/// raised is kept. `each_tick(t, row, &state, &output)` runs after every tick. Each time
+/// step must be within 1 % of the detector's period, and the rate over the whole trace
+/// within [`RATE_TOLERANCE`] of the detector's (checked at the end: a caller writes its
+/// outputs only once this returns).
+pub fn replay_stream<R: std::io::BufRead>(
+    detector: &Detector,
+    mut reader: TraceReader<R>,
+    mut each_tick: impl FnMut(f64, usize, &State, &Output),
+) -> Result<Streamed, StreamError> {
+    let name = reader.name().to_string();
+    let names = reader.channel_names();
+    let columns: Vec<usize> = detector
+        .channels()
+        .iter()
+        .map(|channel| {
+            names
+                .iter()
+                .position(|n| n == channel.as_str())
+                .ok_or_else(|| ReplayError::MissingChannel {
+                    trace: name.clone(),
+                    channel: channel.to_string(),
+                    have: names.join(", "),
+                })
+        })
+        .collect::<Result<_, _>>()?;
+    let mut rules = RowRules::new(detector, &name);
+    let period = 1.0 / f64::from(detector.rate_hz());
+    let mut ticker = Ticker::new(detector);
+    // Times of the first and last rows, and of the levels' ticks, which the stream forgets:
+    // a tick's time is the first row's plus the tick times the period, exact for a uniform
+    // trace.
+    let mut first_t = None;
+    let mut last_t = 0.0;
+    let mut rows = 0usize;
+    let mut truth_t = None;
+    let mut last_line = 0;
+    while let Some(r) = reader.next_row()? {
+        let row = rows;
+        if let Some(prev_row_t) = (row > 0).then_some(last_t)
+            && ((r.t - prev_row_t) - period).abs() > 0.01 * period
+        {
+            return Err(StreamError::Step {
+                trace: name,
+                line: r.line,
+                step: r.t - prev_row_t,
+                period,
+            });
+        }
+        let t0 = *first_t.get_or_insert(r.t);
+        if let Some(p) = r.phase {
+            let id = rules.phase(p, r.line)?;
+            detector.set_phase(&mut ticker.state, id);
+        }
+        if let Some(label) = r.truth {
+            let before = rules.truth.is_some();
+            rules.truth(label, row, r.line)?;
+            if !before && rules.truth.is_some() {
+                truth_t = Some(r.t);
+            }
+        }
+        let values = r.values;
+        let out = ticker.tick(
+            detector,
+            row,
+            |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
+            |tick| t0 + f64::from(tick) * period,
+        );
+        each_tick(r.t, row, &ticker.state, &out);
+        last_t = r.t;
+        last_line = r.line;
+        rows += 1;
+    }
+    match rows {
+        0 => {
+            return Err(StreamError::Trace(TraceError::NoRows {
+                file: name,
+                line: reader.header_line(),
+            }));
+        }
+        1 => {
+            return Err(StreamError::Trace(TraceError::SingleRow {
+                file: name,
+                line: last_line,
+            }));
+        }
+        _ => {}
+    }
+    let rate_hz = (rows - 1) as f64 / (last_t - first_t.unwrap_or(0.0));
+    check_rate(detector, &name, rate_hz)?;
+    Ok(Streamed {
+        decisions: ticker.records,
+        rows,
+        rate_hz,
+        truth: rules.truth.map(|(e, _)| e).zip(truth_t),
+    })
+}
+
+/// Why a streamed replay stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum StreamError {
+    /// A row could not be read.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// The trace does not fit the configuration.
+    #[error(transparent)]
+    Replay(#[from] ReplayError),
+    /// A time step is not the detector's period.
+    #[error(
+        "{trace}: line {line}, column `t`: time step {} s is not the detector's period {} s (within 1 %)",
+        crate::readable(*step),
+        crate::readable(*period)
+    )]
+    Step {
+        /// The trace's name.
+        trace: String,
+        /// The row's file line.
+        line: usize,
+        /// The step from the previous row.
+        step: f64,
+        /// The detector's period.
+        period: f64,
+    },
+}
+
+/// The detector's state and inputs across ticks, and the levels raised so far.
+struct Ticker {
+    state: State,
+    inputs: Inputs,
+    records: Vec<DecisionRecord>,
+}
+
+impl Ticker {
+    fn new(detector: &Detector) -> Ticker {
+        Ticker {
+            state: detector.new_state(),
+            inputs: Inputs::default(),
+            records: Vec::new(),
+        }
+    }
+
+    /// One tick on row `row`: channel `k`'s SI value from `sample(k)` (0 when missing);
+    /// levels raised are recorded with times from `time_of(tick)`.
+    fn tick(
+        &mut self,
+        detector: &Detector,
+        row: usize,
+        sample: impl Fn(usize) -> Option<f64>,
+        time_of: impl Fn(Tick) -> f64,
+    ) -> Output {
+        for (k, s) in self
+            .inputs
+            .samples
+            .iter_mut()
+            .enumerate()
+            .take(detector.channels().len())
+        {
+            *s = detector.sample_from_si(k, sample(k).unwrap_or(0.0));
+        }
+        let out = detector.tick(&mut self.state, row as Tick, &self.inputs);
         for d in &out.decisions {
-            records.push(DecisionRecord {
+            self.records.push(DecisionRecord {
                 event: detector
                     .events()
                     .get(usize::from(d.event.0))
@@ -234,9 +434,8 @@ pub fn replay(
                 t_s: time_of(d.tick),
             });
         }
-        each_tick(row, &state, &out);
+        out
     }
-    Ok(records)
 }
 
 #[cfg(test)]
@@ -323,5 +522,89 @@ mod tests {
             .expect("labels");
         // A trace built in memory counts lines as written without metadata.
         assert_eq!(built.line_of(1), 3);
+    }
+}
+
+#[cfg(test)]
+mod stream_tests {
+    use super::*;
+    use crate::sim::{self, Scenario, SimOptions};
+
+    fn approach() -> Detector {
+        let config = detector_build::Config::from_toml(crate::APPROACH_TOML).expect("parses");
+        detector_build::build(&config).expect("builds")
+    }
+
+    /// A trace read row by row replays exactly as the same trace held in memory: the same
+    /// levels at the same times, the same truth, every tick handed out.
+    #[test]
+    fn streamed_replay_equals_the_replay_in_memory() {
+        let detector = approach();
+        for scenario in [
+            Scenario::ContactHard8,
+            Scenario::LinkCollision2,
+            Scenario::DisturbanceSmall5,
+        ] {
+            let trace = sim::simulate(
+                &scenario,
+                &SimOptions {
+                    seed: 3,
+                    randomize: true,
+                    ..SimOptions::default()
+                },
+            )
+            .expect("simulates");
+            let whole = replay(&detector, &trace, |_, _, _| {}).expect("replays");
+            let text = trace.to_csv();
+            let reader = TraceReader::new(text.as_bytes(), "run.csv").expect("header");
+            let mut ticks = 0;
+            let streamed =
+                replay_stream(&detector, reader, |_, _, _, _| ticks += 1).expect("streams");
+            assert_eq!(ticks, trace.len());
+            assert_eq!(streamed.rows, trace.len());
+            assert_eq!(streamed.decisions.len(), whole.len(), "{scenario}");
+            for (a, b) in streamed.decisions.iter().zip(&whole) {
+                assert_eq!((&a.event, a.level), (&b.event, b.level), "{scenario}");
+                assert!((a.t_s - b.t_s).abs() < 1e-9 && (a.onset_s - b.onset_s).abs() < 1e-9);
+            }
+            let truth = trace
+                .truth_onset()
+                .map(|(row, e)| (e.to_string(), trace.time()[row]));
+            assert_eq!(streamed.truth, truth);
+        }
+    }
+
+    /// A step off the detector's period, or a rate off by more than 0.1 % overall, stops a
+    /// streamed replay with the line named.
+    #[test]
+    fn a_stream_off_the_period_is_refused() {
+        let detector = approach();
+        let header = "t,force_x,force_y,skin_accel,stress_rate,pos_err_x,pos_err_y,vel_des_x,vel_des_y,acc_des_x,acc_des_y\n";
+        let row = |t: f64| format!("{t},0,0,0,0,0,0,0,0,0,0\n");
+        let mut jump = String::from(header);
+        for k in [0, 1, 2, 4, 5] {
+            jump.push_str(&row(f64::from(k) * 0.0002));
+        }
+        let e = replay_stream(
+            &detector,
+            TraceReader::new(jump.as_bytes(), "j.csv").expect("header"),
+            |_, _, _, _| {},
+        )
+        .expect_err("refused")
+        .to_string();
+        assert!(e.contains("line 5") && e.contains("period"), "{e}");
+        // 0.5 % slow, each step within 1 %: refused on the whole trace's rate.
+        let mut slow = String::from(header);
+        for k in 0..100 {
+            slow.push_str(&row(f64::from(k) * 0.000201));
+        }
+        let e = replay_stream(
+            &detector,
+            TraceReader::new(slow.as_bytes(), "s.csv").expect("header"),
+            |_, _, _, _| {},
+        )
+        .expect_err("refused")
+        .to_string();
+        assert!(e.contains("0.1 %"), "{e}");
     }
 }

@@ -30,7 +30,7 @@
 
 use std::fmt::Write as _;
 use std::fs;
-use std::io;
+use std::io::{self, BufRead};
 use std::path::Path;
 
 /// The name of the time column.
@@ -451,156 +451,52 @@ impl Trace {
 
     /// Reads a trace file.
     pub fn read(path: impl AsRef<Path>) -> Result<Trace, TraceError> {
-        let path = path.as_ref();
-        let file = path.display().to_string();
-        let bytes = fs::read(path).map_err(|source| TraceError::Read {
-            file: file.clone(),
-            source,
-        })?;
-        let line_at = |offset: usize| 1 + bytes[..offset].iter().filter(|&&b| b == b'\n').count();
-        // No text trace holds a NUL byte (valid UTF-8 as it is). UTF-16 text shows a
-        // byte-order mark, or ASCII with a NUL beside every character.
-        let head = &bytes[..bytes.len().min(64)];
-        let nul_at = |parity: usize| head.iter().skip(parity).step_by(2).all(|&b| b == 0);
-        let utf16 = bytes.starts_with(&[0xff, 0xfe])
-            || bytes.starts_with(&[0xfe, 0xff])
-            || (head.len() >= 8 && (nul_at(0) || nul_at(1)));
-        const UTF16: &str = " (it looks like UTF-16, which is not supported: save it as UTF-8)";
-        const OTHER: &str = " (a binary file, or text in another encoding: save it as UTF-8)";
-        let hint = if utf16 { UTF16 } else { OTHER };
-        let bad = match std::str::from_utf8(&bytes) {
-            Ok(text) => text.find('\0'),
-            Err(e) => Some(e.valid_up_to()),
-        };
-        if let Some(offset) = bad.map(|o| if utf16 { 0 } else { o }) {
-            return Err(TraceError::NotUtf8 {
-                file,
-                line: line_at(offset),
-                offset,
-                hint,
-            });
-        }
-        // Checked just above.
-        let text = std::str::from_utf8(&bytes).unwrap_or_default();
-        Trace::parse(text, &file)
+        Trace::collect(TraceReader::open(path)?)
     }
 
     /// Parses trace text; `name` (usually the file name) prefixes every error message.
     pub fn parse(text: &str, name: &str) -> Result<Trace, TraceError> {
-        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
-        let file = || name.to_string();
-        let mut metadata = Vec::new();
-        let mut header: Option<(usize, Vec<String>)> = None;
-        let mut rows: Vec<(usize, &str)> = Vec::new();
-        for (i, raw) in text.lines().enumerate() {
-            let line_no = i + 1;
-            let line = raw.trim();
-            if line.is_empty() {
-                continue;
+        Trace::collect(TraceReader::new(text.as_bytes(), name)?)
+    }
+
+    /// Reads every row of `reader` into a trace and checks that time is uniform.
+    fn collect<R: BufRead>(mut reader: TraceReader<R>) -> Result<Trace, TraceError> {
+        let mut t = Vec::new();
+        let mut data: Vec<Vec<f64>> = vec![Vec::new(); reader.channel_names().len()];
+        let mut phase = reader.has_phase().then(Labels::new);
+        let mut truth = reader.has_truth().then(Labels::new);
+        let mut lines = Vec::new();
+        while let Some(row) = reader.next_row()? {
+            t.push(row.t);
+            for (column, v) in data.iter_mut().zip(row.values) {
+                column.push(*v);
             }
-            if let Some(comment) = line.strip_prefix('#') {
-                if let Some(kv) = parse_metadata(comment) {
-                    metadata.push(kv);
-                }
-                continue;
+            if let (Some(labels), Some(p)) = (phase.as_mut(), row.phase) {
+                labels.push(p);
             }
-            if header.is_none() {
-                header = Some((
-                    line_no,
-                    line.split(',').map(|s| s.trim().to_string()).collect(),
-                ));
-            } else {
-                rows.push((line_no, line));
+            if let (Some(labels), Some(p)) = (truth.as_mut(), row.truth) {
+                labels.push(p);
             }
+            lines.push(row.line as u32);
         }
-        let Some((header_line, columns)) = header else {
-            return Err(TraceError::NoHeader { file: file() });
-        };
-        for (i, col) in columns.iter().enumerate() {
-            if col.is_empty() {
-                return Err(TraceError::EmptyColumnName {
-                    file: file(),
-                    line: header_line,
-                    column: i + 1,
-                });
-            }
-            if columns[..i].contains(col) {
-                return Err(TraceError::DuplicateColumn {
-                    file: file(),
-                    line: header_line,
-                    column: i + 1,
-                    name: col.clone(),
-                });
-            }
-        }
-        let Some(t_col) = columns.iter().position(|c| c == TIME_COLUMN) else {
-            return Err(TraceError::MissingTime {
-                file: file(),
-                line: header_line,
-            });
-        };
-        let phase_col = columns.iter().position(|c| c == PHASE_COLUMN);
-        let truth_col = columns.iter().position(|c| c == TRUTH_COLUMN);
-        if rows.is_empty() {
+        let name = reader.name.clone();
+        if t.is_empty() {
             return Err(TraceError::NoRows {
-                file: file(),
-                line: header_line,
+                file: name,
+                line: reader.header_line,
             });
         }
-        let n = rows.len();
-        let numeric: Vec<usize> = (0..columns.len())
-            .filter(|&c| Some(c) != phase_col && Some(c) != truth_col && c != t_col)
-            .collect();
-        let mut t = Vec::with_capacity(n);
-        let mut data: Vec<Vec<f64>> = numeric.iter().map(|_| Vec::with_capacity(n)).collect();
-        let mut phase = phase_col.map(|_| Labels::new());
-        let mut truth = truth_col.map(|_| Labels::new());
-        let mut cells: Vec<&str> = Vec::with_capacity(columns.len());
-        for &(line, row) in &rows {
-            cells.clear();
-            cells.extend(row.split(',').map(str::trim));
-            if cells.len() != columns.len() {
-                return Err(TraceError::CellCount {
-                    file: file(),
-                    line,
-                    expected: columns.len(),
-                    found: cells.len(),
-                });
-            }
-            t.push(parse_number(
-                name,
-                line,
-                t_col,
-                &columns[t_col],
-                cells[t_col],
-            )?);
-            for (slot, &c) in data.iter_mut().zip(&numeric) {
-                slot.push(parse_number(name, line, c, &columns[c], cells[c])?);
-            }
-            if let (Some(p), Some(c)) = (phase.as_mut(), phase_col) {
-                p.push(cells[c]);
-            }
-            if let (Some(p), Some(c)) = (truth.as_mut(), truth_col) {
-                p.push(cells[c]);
-            }
-        }
-        if n == 1 {
-            return Err(TraceError::SingleRow {
-                file: file(),
-                line: rows[0].0,
-            });
-        }
-        let rate_hz = check_time(name, &t, |row| rows[row].0, t_col + 1)?;
+        let rate_hz = check_time(&name, &t, |row| lines[row] as usize, reader.t_col + 1)?;
         Ok(Trace {
-            name: name.to_string(),
+            name,
             t,
             rate_hz,
-            channel_names: numeric.iter().map(|&c| columns[c].clone()).collect(),
+            channel_names: reader.channel_names().to_vec(),
             data,
             phase,
             truth,
-            metadata,
-            lines: LineMap(rows.iter().map(|r| r.0 as u32).collect()),
+            metadata: std::mem::take(&mut reader.metadata),
+            lines: LineMap(lines),
         })
     }
 
@@ -770,6 +666,315 @@ impl Trace {
         }
         Ok(())
     }
+}
+
+/// A trace read row by row, for recordings of any length: the metadata and header are
+/// read and checked when it is made, then each [`TraceReader::next_row`] reads, checks and
+/// hands out one row without keeping it. Rows are checked as [`Trace::parse`] checks them
+/// (cells, numbers, time strictly increasing); whether time is uniform is for the caller
+/// to judge, row by row or at the end.
+pub struct TraceReader<R> {
+    input: R,
+    name: String,
+    /// The last line read (1-based) and the bytes read before it.
+    line: usize,
+    offset: usize,
+    buf: Vec<u8>,
+    metadata: Vec<(String, String)>,
+    columns: Vec<String>,
+    header_line: usize,
+    t_col: usize,
+    phase_col: Option<usize>,
+    truth_col: Option<usize>,
+    /// The numeric input columns, in file order.
+    numeric: Vec<usize>,
+    channel_names: Vec<String>,
+    values: Vec<f64>,
+    phase: String,
+    truth: String,
+    previous_t: Option<f64>,
+}
+
+/// One row handed out by a [`TraceReader`].
+#[derive(Debug)]
+pub struct Row<'a> {
+    /// The file line it was read from.
+    pub line: usize,
+    /// Time (s).
+    pub t: f64,
+    /// The input channels' values, in [`TraceReader::channel_names`] order.
+    pub values: &'a [f64],
+    /// The phase cell, when the trace has a phase column.
+    pub phase: Option<&'a str>,
+    /// The truth cell, when the trace has a truth column.
+    pub truth: Option<&'a str>,
+}
+
+const UTF16_HINT: &str = " (it looks like UTF-16, which is not supported: save it as UTF-8)";
+const OTHER_HINT: &str = " (a binary file, or text in another encoding: save it as UTF-8)";
+
+impl TraceReader<io::BufReader<fs::File>> {
+    /// Opens a trace file.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, TraceError> {
+        let path = path.as_ref();
+        let file = path.display().to_string();
+        let f = fs::File::open(path).map_err(|source| TraceError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        TraceReader::new(io::BufReader::with_capacity(1 << 16, f), &file)
+    }
+}
+
+impl<R: BufRead> TraceReader<R> {
+    /// Reads the metadata and header from `input`; `name` prefixes every error message.
+    pub fn new(mut input: R, name: &str) -> Result<Self, TraceError> {
+        let file = name.to_string();
+        // UTF-16 shows a byte-order mark, or ASCII with a NUL beside every character.
+        let head = input.fill_buf().map_err(|source| TraceError::Read {
+            file: file.clone(),
+            source,
+        })?;
+        let head = &head[..head.len().min(64)];
+        let nul_at = |parity: usize| head.iter().skip(parity).step_by(2).all(|&b| b == 0);
+        if head.starts_with(&[0xff, 0xfe])
+            || head.starts_with(&[0xfe, 0xff])
+            || (head.len() >= 8 && (nul_at(0) || nul_at(1)))
+        {
+            return Err(TraceError::NotUtf8 {
+                file,
+                line: 1,
+                offset: 0,
+                hint: UTF16_HINT,
+            });
+        }
+        let mut reader = TraceReader {
+            input,
+            name: file,
+            line: 0,
+            offset: 0,
+            buf: Vec::new(),
+            metadata: Vec::new(),
+            columns: Vec::new(),
+            header_line: 0,
+            t_col: 0,
+            phase_col: None,
+            truth_col: None,
+            numeric: Vec::new(),
+            channel_names: Vec::new(),
+            values: Vec::new(),
+            phase: String::new(),
+            truth: String::new(),
+            previous_t: None,
+        };
+        let Some(range) = reader.next_line()? else {
+            return Err(TraceError::NoHeader { file: reader.name });
+        };
+        let header = String::from_utf8_lossy(&reader.buf[range]).into_owned();
+        reader.header_line = reader.line;
+        reader.columns = header.split(',').map(|s| s.trim().to_string()).collect();
+        reader.check_header()?;
+        Ok(reader)
+    }
+
+    fn check_header(&mut self) -> Result<(), TraceError> {
+        let (file, line, columns) = (&self.name, self.header_line, &self.columns);
+        for (i, col) in columns.iter().enumerate() {
+            if col.is_empty() {
+                return Err(TraceError::EmptyColumnName {
+                    file: file.clone(),
+                    line,
+                    column: i + 1,
+                });
+            }
+            if columns[..i].contains(col) {
+                return Err(TraceError::DuplicateColumn {
+                    file: file.clone(),
+                    line,
+                    column: i + 1,
+                    name: col.clone(),
+                });
+            }
+        }
+        let Some(t_col) = columns.iter().position(|c| c == TIME_COLUMN) else {
+            return Err(TraceError::MissingTime {
+                file: file.clone(),
+                line,
+            });
+        };
+        self.t_col = t_col;
+        self.phase_col = columns.iter().position(|c| c == PHASE_COLUMN);
+        self.truth_col = columns.iter().position(|c| c == TRUTH_COLUMN);
+        self.numeric = (0..columns.len())
+            .filter(|&c| Some(c) != self.phase_col && Some(c) != self.truth_col && c != t_col)
+            .collect();
+        self.channel_names = self.numeric.iter().map(|&c| columns[c].clone()).collect();
+        self.values = vec![0.0; self.numeric.len()];
+        Ok(())
+    }
+
+    /// The next line that is neither blank nor a comment (comments holding `key: value`
+    /// are kept as metadata): its trimmed text's byte range in the line buffer; `None` at
+    /// the end.
+    fn next_line(&mut self) -> Result<Option<std::ops::Range<usize>>, TraceError> {
+        loop {
+            self.offset += self.buf.len();
+            self.buf.clear();
+            let n = self
+                .input
+                .read_until(b'\n', &mut self.buf)
+                .map_err(|source| TraceError::Read {
+                    file: self.name.clone(),
+                    source,
+                })?;
+            if n == 0 {
+                return Ok(None);
+            }
+            self.line += 1;
+            let nul = self.buf.iter().position(|&b| b == 0);
+            let text = match (nul, std::str::from_utf8(&self.buf)) {
+                (None, Ok(text)) => text,
+                (nul, other) => {
+                    let bad = other.err().map(|e| e.valid_up_to());
+                    let at = nul.into_iter().chain(bad).min().unwrap_or(0);
+                    return Err(TraceError::NotUtf8 {
+                        file: self.name.clone(),
+                        line: self.line,
+                        offset: self.offset + at,
+                        hint: OTHER_HINT,
+                    });
+                }
+            };
+            let bom = if self.line == 1 && text.starts_with('\u{feff}') {
+                '\u{feff}'.len_utf8()
+            } else {
+                0
+            };
+            let body = &text[bom..];
+            let trimmed = body.trim();
+            if trimmed.is_empty() {
+                continue;
+            }
+            if let Some(comment) = trimmed.strip_prefix('#') {
+                if let Some(kv) = parse_metadata(comment) {
+                    self.metadata.push(kv);
+                }
+                continue;
+            }
+            let start = bom + (body.len() - body.trim_start().len());
+            return Ok(Some(start..start + trimmed.len()));
+        }
+    }
+
+    /// The next row, checked; `None` after the last one.
+    pub fn next_row(&mut self) -> Result<Option<Row<'_>>, TraceError> {
+        let Some(range) = self.next_line()? else {
+            return Ok(None);
+        };
+        let line = self.line;
+        let text = std::str::from_utf8(&self.buf[range]).unwrap_or_default();
+        let file = &self.name;
+        let columns = &self.columns;
+        let mut t = f64::NAN;
+        let mut found = 0;
+        let mut k = 0;
+        self.phase.clear();
+        self.truth.clear();
+        for (c, cell) in comma_separated(text).enumerate() {
+            found += 1;
+            if c >= columns.len() {
+                continue;
+            }
+            if c == self.t_col {
+                t = parse_number(file, line, c, &columns[c], cell)?;
+            } else if Some(c) == self.phase_col {
+                self.phase.push_str(cell);
+            } else if Some(c) == self.truth_col {
+                self.truth.push_str(cell);
+            } else if let Some(v) = self.values.get_mut(k) {
+                *v = parse_number(file, line, c, &columns[c], cell)?;
+                k += 1;
+            }
+        }
+        if found != columns.len() {
+            return Err(TraceError::CellCount {
+                file: file.clone(),
+                line,
+                expected: columns.len(),
+                found,
+            });
+        }
+        if let Some(previous) = self.previous_t
+            && t <= previous
+        {
+            return Err(TraceError::TimeNotIncreasing {
+                file: file.clone(),
+                line,
+                column: self.t_col + 1,
+                t,
+                previous,
+            });
+        }
+        self.previous_t = Some(t);
+        Ok(Some(Row {
+            line,
+            t,
+            values: &self.values,
+            phase: self.phase_col.map(|_| self.phase.as_str()),
+            truth: self.truth_col.map(|_| self.truth.as_str()),
+        }))
+    }
+
+    /// The input channels' names, in file order.
+    pub fn channel_names(&self) -> &[String] {
+        &self.channel_names
+    }
+
+    /// Whether the trace has a phase column.
+    pub fn has_phase(&self) -> bool {
+        self.phase_col.is_some()
+    }
+
+    /// Whether the trace has a truth column.
+    pub fn has_truth(&self) -> bool {
+        self.truth_col.is_some()
+    }
+
+    /// The name errors are reported under.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The header's file line.
+    pub fn header_line(&self) -> usize {
+        self.header_line
+    }
+
+    /// The metadata read so far.
+    pub fn metadata(&self) -> &[(String, String)] {
+        &self.metadata
+    }
+}
+
+/// The cells of a row, each trimmed: split at the ASCII commas by a byte search.
+fn comma_separated(text: &str) -> impl Iterator<Item = &str> {
+    let mut rest = Some(text);
+    std::iter::from_fn(move || {
+        let r = rest?;
+        let (cell, tail) = match r.bytes().position(|b| b == b',') {
+            // A comma is one byte: both sides are whole characters.
+            Some(i) => (&r[..i], Some(&r[i + 1..])),
+            None => (r, None),
+        };
+        rest = tail;
+        let blank = |b: Option<&u8>| b.is_some_and(|b| b.is_ascii_whitespace() || !b.is_ascii());
+        let bytes = cell.as_bytes();
+        Some(if blank(bytes.first()) || blank(bytes.last()) {
+            cell.trim()
+        } else {
+            cell
+        })
+    })
 }
 
 /// Checks a channel name given to a constructor.
