@@ -857,24 +857,15 @@ fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
     Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
 }
 
-/// A cancellation gain in Q16.16: finite, |gain| < 32768, and zero or at least one step.
-/// Through `f32`, as [`low_pass_alpha`]: a relative 6·10⁻⁸.
+/// A cancellation gain in Q16.16, as a [`Signal`](crate::Signal) converts it: finite,
+/// |gain| < 32768, and zero or at least one step.
 fn gain_q16(gain: f32) -> Result<i32, StageError> {
-    let scaled = gain * 65536.0;
-    // 2^31 and the f32 values below it are exact, and rounding half away from zero keeps
-    // them below 2^31 in magnitude (the f32 below 2^31 is 2^31 − 128).
-    if !(scaled.is_finite() && scaled.abs() < 2_147_483_648.0) {
-        return Err(StageError::Gain { gain });
-    }
-    let q = if scaled >= 0.0 {
-        (scaled + 0.5) as i32
+    let q = crate::Signal::from_f32(gain).to_bits();
+    if gain.is_finite() && gain.abs() < 32768.0 && (q != 0 || gain == 0.0) && q != i32::MIN {
+        Ok(q)
     } else {
-        (scaled - 0.5) as i32
-    };
-    if q == 0 && gain != 0.0 {
-        return Err(StageError::Gain { gain });
+        Err(StageError::Gain { gain })
     }
-    Ok(q)
 }
 
 /// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The
