@@ -462,9 +462,10 @@ impl Stage {
                 gain,
             } => {
                 let y = low_pass(st, get(motion), alpha);
-                // |y| ≤ 2^31 and |gain| < 2^31: the product fits in 63 bits.
-                let predicted = sat32((i64::from(y) * i64::from(gain)) >> 16);
-                get(input).saturating_sub(predicted)
+                // |y| ≤ 2^31 and |gain| < 2^31: the product fits in 63 bits, and the
+                // difference in 64; it saturates once, at the end.
+                let predicted = (i64::from(y) * i64::from(gain)) >> 16;
+                sat32(i64::from(get(input)) - predicted)
             }
             StageKind::Rate { input, rate } => {
                 let x = get(input);
@@ -1022,6 +1023,33 @@ mod tests {
                 "n = {n}"
             );
         }
+    }
+
+    /// The prediction may exceed the signal range while the difference does not, or
+    /// overshoot it on the other side: only the difference saturates.
+    #[test]
+    fn cancel_saturates_the_difference_only() {
+        let cancel = |gain: f32| StageSpec::Cancel {
+            input: 0,
+            motion: 1,
+            gain,
+            cutoff_hz: 10.0,
+        };
+        let (floor, ceiling) = (Signal::MIN.to_f64(), Signal::MAX.to_f64());
+        // 20000 − 2·30000 = −40000: the floor, not 20000 − 32768.
+        assert_eq!(
+            run(cancel(2.0), &[&[20000.0; 3], &[30000.0; 3]]),
+            [floor; 3]
+        );
+        assert_eq!(
+            run(cancel(-2.0), &[&[-20000.0; 3], &[30000.0; 3]]),
+            [ceiling; 3]
+        );
+        // 30000 − 2·20000 = −10000 lies inside although the prediction, 40000, does not.
+        assert_eq!(
+            run(cancel(2.0), &[&[30000.0; 3], &[20000.0; 3]]),
+            [-10000.0; 3]
+        );
     }
 
     #[test]
