@@ -341,6 +341,7 @@ impl Detector {
 
     /// The sample for channel `index` from its value in SI units: scaled, rounded and
     /// saturated (NaN gives zero).
+    #[inline]
     pub fn sample_from_si(&self, index: usize, si: f64) -> Signal {
         let scale = self.channel_scales.get(index).copied().unwrap_or(1.0);
         Signal::from_f64(si * f64::from(scale))

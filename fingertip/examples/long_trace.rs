@@ -1,16 +1,16 @@
-//! Writes a long event-free trace to standard output, row by row, for measuring how a
-//! replay of a whole working day behaves (memory, ticks per second):
+//! Writes a long event-free trace ([`fingertip::sim::long`]) to standard output, for
+//! measuring how a replay of a whole working day behaves (memory, ticks per second):
 //!
 //! ```sh
 //! cargo run --release -p fingertip --example long_trace -- 10 > day.csv   # 10 hours
 //! /usr/bin/time -v fingertip replay day.csv
 //! ```
 //!
-//! The channels are those of the approach configuration at 5 kHz: sensor noise and mains
-//! hum on the analog ones, a slow back-and-forth motion in the controller's context. The
-//! argument is the length in hours (default 1).
+//! The argument is the length in hours (default 1).
 
 use std::io::{BufWriter, Write};
+
+use fingertip::sim::long::{RATE_HZ, write_long_recording};
 
 fn main() -> std::io::Result<()> {
     let hours: f64 = std::env::args()
@@ -18,47 +18,7 @@ fn main() -> std::io::Result<()> {
         .and_then(|a| a.parse().ok())
         .filter(|h: &f64| h.is_finite() && *h > 0.0)
         .unwrap_or(1.0);
-    let rate = 5000.0;
-    let rows = (hours * 3600.0 * rate) as u64;
     let mut out = BufWriter::with_capacity(1 << 20, std::io::stdout().lock());
-    writeln!(
-        out,
-        "# long_trace: {hours} h of event-free motion at {rate} Hz"
-    )?;
-    writeln!(
-        out,
-        "t,force_x,force_y,skin_accel,stress_rate,pos_err_x,pos_err_y,vel_des_x,vel_des_y,acc_des_x,acc_des_y"
-    )?;
-    // A small linear congruential generator: reproducible noise without a dependency.
-    let mut state: u64 = 0x2545_f491_4f6c_dd1d;
-    let mut noise = move || {
-        state = state
-            .wrapping_mul(6_364_136_223_846_793_005)
-            .wrapping_add(1);
-        ((state >> 11) as f64 / (1u64 << 53) as f64) - 0.5
-    };
-    let mut line = String::with_capacity(160);
-    for k in 0..rows {
-        let t = k as f64 / rate;
-        let hum = (std::f64::consts::TAU * 50.0 * t).sin();
-        let phase = std::f64::consts::TAU * 0.25 * t;
-        let (v, a) = (
-            0.02 * phase.sin(),
-            0.02 * std::f64::consts::TAU * 0.25 * phase.cos(),
-        );
-        line.clear();
-        use std::fmt::Write as _;
-        let _ = writeln!(
-            line,
-            "{t:.4},{:.4},{:.4},{:.3},{:.3},{:.7},{:.7},{v:.5},0,{a:.5},0",
-            0.01 * noise() + 0.01 * hum,
-            0.01 * noise(),
-            0.5 * noise() + 0.2 * hum,
-            0.5 * noise(),
-            15e-6 + 1e-6 * noise(),
-            1e-6 * noise(),
-        );
-        out.write_all(line.as_bytes())?;
-    }
+    write_long_recording(&mut out, (hours * 3600.0 * RATE_HZ) as u64)?;
     out.flush()
 }

@@ -2,7 +2,7 @@
 
 use detector_core::{Detector, Inputs, Level, Output, PhaseId, State, Tick};
 
-use crate::trace::{Trace, TraceError, TraceReader};
+use crate::trace::{ReadAhead, Trace, TraceError, TraceReader};
 
 /// A level raised during a replay, with times in seconds of the trace's `t` column.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -266,9 +266,18 @@ pub struct Streamed {
 /// step must be within 1 % of the detector's period, and the rate over the whole trace
 /// within [`RATE_TOLERANCE`] of the detector's (checked at the end: a caller writes its
 /// outputs only once this returns).
-pub fn replay_stream<R: std::io::BufRead>(
+pub fn replay_stream<R: std::io::BufRead + Send>(
     detector: &Detector,
-    mut reader: TraceReader<R>,
+    reader: TraceReader<R>,
+    each_tick: impl FnMut(f64, usize, &State, &Output),
+) -> Result<Streamed, StreamError> {
+    std::thread::scope(|scope| replay_rows(detector, ReadAhead::spawn(scope, reader), each_tick))
+}
+
+/// [`replay_stream`] once the rows are parsed on their own thread.
+fn replay_rows(
+    detector: &Detector,
+    mut reader: ReadAhead,
     mut each_tick: impl FnMut(f64, usize, &State, &Output),
 ) -> Result<Streamed, StreamError> {
     let name = reader.name().to_string();

@@ -378,6 +378,59 @@ fn outputs_never_destroy_inputs_and_are_all_or_none() {
 }
 
 /// The frames the firmware would send decode back to the same confirmation.
+/// Ctrl-C in the middle of a replay, every output staged: the command exits with 130 and
+/// leaves neither an output nor a staging file behind. The recording comes through a pipe
+/// that stays open, so the replay is surely mid-way when the signal comes.
+#[test]
+fn ctrl_c_leaves_no_output_and_no_staging_file() {
+    use std::io::Write;
+    let dir = scratch("ctrl-c");
+    let path = |name: &str| dir.join(name).to_str().expect("utf-8").to_owned();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_fingertip"))
+        .args(["replay", "/dev/stdin", "--out", &path("conf.csv")])
+        .args(["--candump", &path("frames.log"), "--plot", &path("run.png")])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("the fingertip binary runs");
+    let mut recording = Vec::new();
+    fingertip::sim::long::write_long_recording(&mut recording, 2000).expect("in memory");
+    let mut stdin = child.stdin.take().expect("piped");
+    stdin.write_all(&recording).expect("the replay reads");
+    stdin.flush().expect("the replay reads");
+    let entries = || -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .expect("scratch dir")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    // The staging files exist before the first row is read.
+    let start = std::time::Instant::now();
+    while entries().len() < 2 && start.elapsed() < std::time::Duration::from_secs(20) {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    let staged = entries();
+    assert!(
+        staged.len() == 2
+            && staged
+                .iter()
+                .all(|n| n.starts_with('.') && n.contains(".tmp-")),
+        "{staged:?}"
+    );
+    let interrupted = Command::new("sh")
+        .args(["-c", &format!("kill -INT {}", child.id())])
+        .status()
+        .expect("sh runs");
+    assert!(interrupted.success());
+    let out = child.wait_with_output().expect("the replay ends");
+    drop(stdin);
+    assert_eq!(out.status.code(), Some(130), "{}", text(&out.stderr));
+    assert_eq!(entries(), Vec::<String>::new());
+}
+
 #[test]
 fn replay_candump_decodes_to_the_same_events() {
     let dir = scratch("candump");

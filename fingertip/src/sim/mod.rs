@@ -15,6 +15,7 @@
 //! - `docs/simulator.md` describes the model, the numbers and their ranges.
 
 pub mod filters;
+pub mod long;
 pub mod params;
 
 mod engine;
