@@ -3,6 +3,7 @@
 //! tools behind the `fingertip` command.
 
 pub mod can_tools;
+pub mod corpus;
 pub mod identify;
 pub mod output;
 pub mod plot;

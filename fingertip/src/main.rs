@@ -144,7 +144,8 @@ enum Command {
         #[arg(long)]
         bitrate: Option<u32>,
     },
-    /// Randomized runs of every scenario: detections, errors, latency, false alarms.
+    /// Randomized runs of every scenario, or labelled recordings (`--traces`): detections,
+    /// errors, latency, false alarms.
     Evaluate {
         /// Randomized runs per scenario.
         #[arg(long, default_value_t = 1000)]
@@ -152,6 +153,15 @@ enum Command {
         /// Base seed; run k of a scenario uses a seed derived from it.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Score labelled recordings instead of simulated runs: trace files, or directories
+        /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
+        /// is one event.
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours"])]
+        traces: Vec<PathBuf>,
+        /// With `--traces`: how long after a labelled event's end a confirmation still
+        /// counts for it (ms).
+        #[arg(long, default_value_t = fingertip::corpus::DEFAULT_AFTER_MS)]
+        after_ms: f64,
         /// Detector configuration (TOML); the approach configuration when absent. Give it
         /// up to four times to compare detectors on the very same runs, side by side.
         #[arg(long)]
@@ -302,11 +312,19 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Evaluate {
+            traces,
+            after_ms,
+            config,
+            json,
+            ..
+        } if !traces.is_empty() => evaluate_traces(&traces, after_ms, &config, json.as_deref()),
+        Command::Evaluate {
             runs,
             seed,
             config,
             free_hours,
             json,
+            ..
         } => evaluate(runs, seed, &config, free_hours, json.as_deref()),
         Command::Identify {
             trace,
@@ -494,7 +512,7 @@ fn replay_cmd(
             .map_err(|e| e.into_error())
             .context("writing the outputs")?;
     }
-    let truth = streamed.truth.clone();
+    let truth = streamed.first_truth();
     if let (Some(k), Some(f)) = (plot_k, figure) {
         let (t, series) = f.finish();
         let run = RunPlot {
@@ -512,6 +530,7 @@ fn replay_cmd(
             "trace": name,
             "config": config_name,
             "truth": truth.as_ref().map(|(e, t)| serde_json::json!({"event": e, "onset_s": t})),
+            "labelled": streamed.labelled,
             "events": streamed.decisions,
         });
         println!("{report}");
@@ -523,14 +542,26 @@ fn replay_cmd(
         (streamed.rate_hz * 1000.0).round() / 1000.0,
         detector.rate_hz()
     );
-    if let Some((event, onset)) = &truth {
-        println!("true event: {event} at {:.2} ms", onset * 1e3);
+    for l in &streamed.labelled {
+        println!(
+            "true event: {} at {:.2} ms (labelled until {:.2} ms)",
+            l.event,
+            l.onset_s * 1e3,
+            l.end_s * 1e3
+        );
     }
     if streamed.decisions.is_empty() {
         println!("no level raised");
     }
     for d in &streamed.decisions {
-        println!("{}", describe(d, truth.as_ref()));
+        // Measured from the latest labelled onset before it.
+        let before = streamed
+            .labelled
+            .iter()
+            .rev()
+            .find(|l| l.onset_s <= d.t_s)
+            .map(|l| (l.event.clone(), l.onset_s));
+        println!("{}", describe(d, before.as_ref()));
     }
     Ok(())
 }
@@ -1035,36 +1066,10 @@ impl Tally {
     /// The table per scenario, the false-alarm rate and the first failures of each
     /// scenario with the command that reproduces them.
     fn print(&self) {
-        println!(
-            "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
-            "scenario",
-            "expected",
-            "runs",
-            "right",
-            "wrong",
-            "missed",
-            "repeat",
-            "med ms",
-            "p95 ms",
-            "p99 ms",
-            "max ms"
-        );
-        for r in &self.reports {
-            println!(
-                "{:<26} {:<15} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
-                r.name,
-                r.expected,
-                r.runs,
-                r.correct,
-                r.wrong,
-                r.missed,
-                r.repeated,
-                r.latency_ms.median,
-                r.latency_ms.p95,
-                r.latency_ms.p99,
-                r.latency_ms.max
-            );
-        }
+        let mut table = Vec::new();
+        // Writing to memory cannot fail.
+        let _ = score::write_table(&mut table, ("scenario", "runs"), true, &self.reports);
+        print!("{}", String::from_utf8_lossy(&table));
         self.print_false_alarms("");
         self.print_failures();
     }
@@ -1162,13 +1167,9 @@ fn print_comparison(tallies: &[(String, Tally)]) {
 /// At most this many `--config` in one evaluation (the comparison table's width).
 const MAX_COMPARED: usize = 4;
 
-fn evaluate(
-    runs: usize,
-    seed: u64,
-    configs: &[PathBuf],
-    free_hours: f64,
-    json: Option<&Path>,
-) -> Result<()> {
+/// The detectors of `--config` (at most [`MAX_COMPARED`]; the default one when none) and
+/// their names.
+fn load_detectors(configs: &[PathBuf]) -> Result<(Vec<Detector>, Vec<String>)> {
     if configs.len() > MAX_COMPARED {
         bail!(
             "--config is given {} times: at most {MAX_COMPARED} detectors are compared at once",
@@ -1183,7 +1184,17 @@ fn evaluate(
             .map(|c| load_detector(Some(c)))
             .collect::<Result<Vec<_>>>()?
     };
-    let (detectors, names): (Vec<Detector>, Vec<String>) = loaded.into_iter().unzip();
+    Ok(loaded.into_iter().unzip())
+}
+
+fn evaluate(
+    runs: usize,
+    seed: u64,
+    configs: &[PathBuf],
+    free_hours: f64,
+    json: Option<&Path>,
+) -> Result<()> {
+    let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
     let plan = plan_outputs(&inputs, &[json.map(|p| (p, Kind::File))])?;
     if !(1..=MAX_RUNS).contains(&runs) {
@@ -1240,6 +1251,105 @@ fn evaluate(
                 tallies.iter().map(|(name, t)| t.json(name)).collect();
             report["configs"] = serde_json::Value::from(per_config);
         }
+        plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    plan.commit()?;
+    Ok(())
+}
+
+/// The longest wait after a labelled event's end that `--after-ms` takes: a minute.
+const MAX_AFTER_MS: f64 = 60_000.0;
+
+/// `evaluate --traces`: every recording replayed with every detector, in parallel behind a
+/// progress bar, and scored per labelled event ([`fingertip::corpus`]).
+fn evaluate_traces(
+    paths: &[PathBuf],
+    after_ms: f64,
+    configs: &[PathBuf],
+    json: Option<&Path>,
+) -> Result<()> {
+    if !(after_ms.is_finite() && (0.0..=MAX_AFTER_MS).contains(&after_ms)) {
+        bail!(
+            "--after-ms = {} must be within 0..={MAX_AFTER_MS} ms",
+            fingertip::readable(after_ms)
+        );
+    }
+    let (detectors, names) = load_detectors(configs)?;
+    let files = fingertip::corpus::find_recordings(paths)?;
+    let inputs: Vec<&Path> = configs.iter().chain(&files).map(PathBuf::as_path).collect();
+    let plan = plan_outputs(&inputs, &[json.map(|p| (p, Kind::File))])?;
+    let jobs = files.len() * detectors.len();
+    let bar = ProgressBar::new(jobs as u64).with_style(
+        ProgressStyle::with_template(
+            "{elapsed_precise} [{bar:40}] {pos}/{len} recordings ({eta} left)",
+        )?
+        .progress_chars("=> "),
+    );
+    let started = Instant::now();
+    let results: Vec<fingertip::corpus::RecordingResult> = (0..jobs)
+        .into_par_iter()
+        .map(|i| {
+            let (file, detector) = (&files[i / detectors.len()], &detectors[i % detectors.len()]);
+            let reader = TraceReader::open(file)?;
+            let name = reader.name().to_string();
+            let streamed = replay::replay_stream(detector, reader, |_, _, _, _| {})?;
+            bar.inc(1);
+            Ok(fingertip::corpus::RecordingResult::new(
+                &name,
+                &streamed,
+                after_ms / 1e3,
+            ))
+        })
+        .collect::<Result<_>>()?;
+    bar.finish_and_clear();
+    let wall = started.elapsed().as_secs_f64();
+    let reports: Vec<(String, fingertip::corpus::CorpusReport)> = names
+        .into_iter()
+        .enumerate()
+        .map(|(d, name)| {
+            let mine: Vec<_> = results
+                .iter()
+                .skip(d)
+                .step_by(detectors.len())
+                .cloned()
+                .collect();
+            let events: Vec<String> = detectors[d]
+                .events()
+                .iter()
+                .map(|n| n.to_string())
+                .collect();
+            (
+                name,
+                fingertip::corpus::CorpusReport::tally(&events, &mine, after_ms),
+            )
+        })
+        .collect();
+    use std::io::Write as _;
+    let mut stdout = std::io::stdout().lock();
+    for (k, (name, report)) in reports.iter().enumerate() {
+        if reports.len() > 1 {
+            writeln!(stdout, "[{}] {name}", k + 1)?;
+        } else {
+            writeln!(stdout, "{name}")?;
+        }
+        report.write(&mut stdout)?;
+    }
+    let hours = reports.first().map_or(0.0, |(_, r)| r.hours);
+    writeln!(
+        stdout,
+        "throughput: {:.0} recorded s in {wall:.1} wall s = {:.0} recorded s per wall s ({} threads, {} detector(s))",
+        hours * 3600.0,
+        hours * 3600.0 * detectors.len() as f64 / wall.max(1e-9),
+        rayon::current_num_threads(),
+        detectors.len()
+    )?;
+    if json.is_some() {
+        let per_config: Vec<serde_json::Value> =
+            reports.iter().map(|(name, r)| r.json(name)).collect();
+        let report = match per_config.as_slice() {
+            [one] => one.clone(),
+            _ => serde_json::json!({ "configs": per_config }),
+        };
         plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     plan.commit()?;

@@ -83,20 +83,6 @@ pub enum ReplayError {
         /// The configured events, comma-separated.
         have: String,
     },
-    /// The `truth` column labels more than one event; scoring takes one per trace.
-    #[error(
-        "{trace}: line {line}, column 'truth': a second event '{second}' after '{first}': one labelled event per trace is scored"
-    )]
-    SeveralTruths {
-        /// The trace's name.
-        trace: String,
-        /// The file line where the second event starts.
-        line: usize,
-        /// The first event.
-        first: String,
-        /// The second.
-        second: String,
-    },
 }
 
 /// How far a trace's rate may be from the detector's, as a fraction of the detector's: a
@@ -113,16 +99,29 @@ fn listed(names: &[detector_core::Name]) -> String {
         .join(", ")
 }
 
+/// An event labelled in a trace's `truth` column: a maximal run of rows with the same
+/// non-empty label (docs/trace-format.md).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Labelled {
+    /// The event's name.
+    pub event: String,
+    /// Its onset: the time of the run's first row (s).
+    pub onset_s: f64,
+    /// Its end: the time of the run's last row (s).
+    pub end_s: f64,
+}
+
 /// The rules every row of a replayed trace must follow, checked as it comes: its phase is
-/// one of the configuration's, its truth label one of the configuration's events, and at
-/// most one event is labelled. Remembers the truth's onset.
+/// one of the configuration's, its truth label empty or one of the configuration's events.
+/// Collects the labelled events.
 struct RowRules<'d> {
     detector: &'d Detector,
     trace: String,
     /// The last phase label seen and its id (phases change seldom).
     phase: Option<(String, PhaseId)>,
-    /// The labelled event and the row it starts on.
-    truth: Option<(String, usize)>,
+    /// The events labelled so far; whether the last is still going on.
+    labelled: Vec<Labelled>,
+    open: bool,
 }
 
 impl<'d> RowRules<'d> {
@@ -131,7 +130,8 @@ impl<'d> RowRules<'d> {
             detector,
             trace: trace.to_string(),
             phase: None,
-            truth: None,
+            labelled: Vec::new(),
+            open: false,
         }
     }
 
@@ -155,30 +155,35 @@ impl<'d> RowRules<'d> {
         Ok(id)
     }
 
-    /// The truth label of row `row` at `line`.
-    fn truth(&mut self, label: &str, row: usize, line: usize) -> Result<(), ReplayError> {
+    /// The truth label of the row at time `t` and `line`: an empty label ends the event
+    /// going on, another label than its starts a new one.
+    fn truth(&mut self, label: &str, t: f64, line: usize) -> Result<(), ReplayError> {
         if label.is_empty() {
+            self.open = false;
             return Ok(());
         }
-        match &self.truth {
-            Some((first, _)) if first == label => Ok(()),
-            Some((first, _)) => Err(ReplayError::SeveralTruths {
-                trace: self.trace.clone(),
-                line,
-                first: first.clone(),
-                second: label.to_string(),
-            }),
-            None if self.detector.event(label).is_none() => Err(ReplayError::UnknownTruth {
+        match self.labelled.last_mut() {
+            Some(last) if self.open && last.event == label => {
+                last.end_s = t;
+                return Ok(());
+            }
+            _ => {}
+        }
+        if self.detector.event(label).is_none() {
+            return Err(ReplayError::UnknownTruth {
                 trace: self.trace.clone(),
                 line,
                 event: label.to_string(),
                 have: listed(self.detector.events()),
-            }),
-            None => {
-                self.truth = Some((label.to_string(), row));
-                Ok(())
-            }
+            });
         }
+        self.labelled.push(Labelled {
+            event: label.to_string(),
+            onset_s: t,
+            end_s: t,
+        });
+        self.open = true;
+        Ok(())
     }
 }
 
@@ -235,7 +240,7 @@ pub fn replay(
             detector.set_phase(&mut ticker.state, id);
         }
         if let Some(label) = trace.truth().and_then(|l| l.get(row)) {
-            rules.truth(label, row, line)?;
+            rules.truth(label, t[row], line)?;
         }
         let out = ticker.tick(
             detector,
@@ -257,8 +262,17 @@ pub struct Streamed {
     pub rows: usize,
     /// The trace's rate over all its rows (Hz).
     pub rate_hz: f64,
-    /// The labelled event and its onset (s), if any.
-    pub truth: Option<(String, f64)>,
+    /// The times of its first and last rows (s).
+    pub span_s: (f64, f64),
+    /// The events labelled in the trace's `truth` column, in order.
+    pub labelled: Vec<Labelled>,
+}
+
+impl Streamed {
+    /// The first labelled event and its onset (s), if any.
+    pub fn first_truth(&self) -> Option<(String, f64)> {
+        self.labelled.first().map(|l| (l.event.clone(), l.onset_s))
+    }
 }
 
 /// Replays a trace read row by row, for recordings of any length: nothing but the levels
@@ -305,7 +319,6 @@ fn replay_rows(
     let mut first_t = None;
     let mut last_t = 0.0;
     let mut rows = 0usize;
-    let mut truth_t = None;
     let mut last_line = 0;
     while let Some(r) = reader.next_row()? {
         let row = rows;
@@ -325,11 +338,7 @@ fn replay_rows(
             detector.set_phase(&mut ticker.state, id);
         }
         if let Some(label) = r.truth {
-            let before = rules.truth.is_some();
-            rules.truth(label, row, r.line)?;
-            if !before && rules.truth.is_some() {
-                truth_t = Some(r.t);
-            }
+            rules.truth(label, r.t, r.line)?;
         }
         let values = r.values;
         let out = ticker.tick(
@@ -358,13 +367,15 @@ fn replay_rows(
         }
         _ => {}
     }
-    let rate_hz = (rows - 1) as f64 / (last_t - first_t.unwrap_or(0.0));
+    let first_t = first_t.unwrap_or(0.0);
+    let rate_hz = (rows - 1) as f64 / (last_t - first_t);
     check_rate(detector, &name, rate_hz)?;
     Ok(Streamed {
         decisions: ticker.records,
         rows,
         rate_hz,
-        truth: rules.truth.map(|(e, _)| e).zip(truth_t),
+        span_s: (first_t, last_t),
+        labelled: rules.labelled,
     })
 }
 
@@ -487,8 +498,8 @@ mod tests {
     }
 
     /// Each way a trace can disagree with the configuration is refused before any tick,
-    /// naming the file line (comments counted): an unknown phase or truth label, a second
-    /// labelled event, a rate beyond 0.1 %, in either direction.
+    /// naming the file line (comments counted): an unknown phase or truth label, a rate
+    /// beyond 0.1 %, in either direction.
     #[test]
     fn traces_that_disagree_with_the_configuration_are_refused() {
         let mut phase = vec!["approach"; 10];
@@ -504,17 +515,53 @@ mod tests {
             &text(5000.0, 10, &[], &truth),
             &["line 8", "'slip'", "contact"],
         );
-        let truth = ["", "contact", "contact", "", "disturbance"];
-        refused(
-            &text(5000.0, 10, &[], &truth),
-            &["line 8", "'disturbance' after 'contact'"],
-        );
         for rate in [4950.0, 4990.0, 5010.0, 5050.0] {
             refused(&text(rate, 10, &[], &[]), &["Hz", "5000 Hz", "0.1 %"]);
         }
     }
 
-    /// Within the tolerance, and with one event labelled twice apart, the trace runs.
+    /// Each maximal run of rows with the same label is one labelled event, its onset the
+    /// run's first row and its end the last: an event may follow another directly, and
+    /// the same event may come back.
+    #[test]
+    fn every_run_of_a_label_is_one_event() {
+        let truth = [
+            "",
+            "contact",
+            "contact",
+            "",
+            "disturbance",
+            "disturbance",
+            "contact",
+            "",
+            "",
+            "",
+        ];
+        let csv = text(5000.0, 10, &[], &truth);
+        let reader = TraceReader::new(csv.as_bytes(), "run.csv").expect("header");
+        let streamed = replay_stream(&approach(), reader, |_, _, _, _| {}).expect("runs");
+        let got: Vec<(&str, f64, f64)> = streamed
+            .labelled
+            .iter()
+            .map(|l| (l.event.as_str(), l.onset_s * 5000.0, l.end_s * 5000.0))
+            .collect();
+        let want = [
+            ("contact", 1.0, 2.0),
+            ("disturbance", 4.0, 5.0),
+            ("contact", 6.0, 6.0),
+        ];
+        assert_eq!(got.len(), want.len());
+        for ((e, on, end), (we, won, wend)) in got.iter().zip(want) {
+            assert_eq!(*e, we);
+            assert!(
+                (on - won).abs() < 1e-9 && (end - wend).abs() < 1e-9,
+                "{got:?}"
+            );
+        }
+        assert_eq!(streamed.first_truth().map(|t| t.0), Some("contact".into()));
+    }
+
+    /// Within the tolerance, and with events labelled apart, the trace runs.
     #[test]
     fn traces_within_the_rules_run() {
         let truth = ["", "contact", "", "contact"];
@@ -579,7 +626,7 @@ mod stream_tests {
             let truth = trace
                 .truth_onset()
                 .map(|(row, e)| (e.to_string(), trace.time()[row]));
-            assert_eq!(streamed.truth, truth);
+            assert_eq!(streamed.first_truth(), truth);
         }
     }
 

@@ -1,7 +1,7 @@
 //! Scoring replays against the truth: what a run detected, how fast, and the statistics
 //! over many runs that `fingertip evaluate` reports.
 
-use crate::replay::DecisionRecord;
+use crate::replay::{DecisionRecord, Labelled};
 
 /// What a run's confirmations amount to, given the event expected.
 #[derive(Clone, Debug, PartialEq)]
@@ -180,6 +180,116 @@ impl ScenarioReport {
     }
 }
 
+/// The table of an evaluation, a row per report: right, wrong, missed, repeated and the
+/// latency percentiles; the first column named `first` (scenario or event), with the
+/// expected event beside it when `expected`, the count named `count` (runs or events).
+pub fn write_table(
+    out: &mut impl std::io::Write,
+    (first, count): (&str, &str),
+    expected: bool,
+    reports: &[ScenarioReport],
+) -> std::io::Result<()> {
+    let lead = |name: &str, event: &str| {
+        if expected {
+            format!("{name:<26} {event:<15}")
+        } else {
+            format!("{name:<26}")
+        }
+    };
+    writeln!(
+        out,
+        "{} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7} {:>7} {:>7} {:>7}",
+        lead(first, "expected"),
+        count,
+        "right",
+        "wrong",
+        "missed",
+        "repeat",
+        "med ms",
+        "p95 ms",
+        "p99 ms",
+        "max ms"
+    )?;
+    for r in reports {
+        writeln!(
+            out,
+            "{} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
+            lead(&r.name, &r.expected),
+            r.runs,
+            r.correct,
+            r.wrong,
+            r.missed,
+            r.repeated,
+            r.latency_ms.median,
+            r.latency_ms.p95,
+            r.latency_ms.p99,
+            r.latency_ms.max
+        )?;
+    }
+    Ok(())
+}
+
+/// How one recording went: each labelled event's outcome, and the confirmations outside
+/// every event.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordingScore {
+    /// Per labelled event, in order: its name, onset (s) and outcome.
+    pub events: Vec<(String, f64, Outcome)>,
+    /// Confirmations outside every event's window: the event confirmed and when (s).
+    pub false_confirmations: Vec<(String, f64)>,
+    /// The recording's time outside every event's window (s).
+    pub outside_s: f64,
+}
+
+/// Scores a recording with several labelled events. A confirmation belongs to the latest
+/// labelled event whose window holds it; an event's window runs from its onset to `after_s`
+/// past its end. Each event is then classified as a simulated run is ([`classify`], on the
+/// confirmations of its window: the right event once, something else, several times, or
+/// nothing); a confirmation in no window is a false confirmation. `span` is the recording's
+/// first and last time (s).
+pub fn score_recording(
+    labelled: &[Labelled],
+    decisions: &[DecisionRecord],
+    after_s: f64,
+    span: (f64, f64),
+) -> RecordingScore {
+    let mut mine: Vec<Vec<DecisionRecord>> = vec![Vec::new(); labelled.len()];
+    let mut false_confirmations = Vec::new();
+    for d in decisions.iter().filter(|d| d.is_confirm()) {
+        let owner = labelled
+            .iter()
+            .rposition(|l| l.onset_s <= d.t_s && d.t_s <= l.end_s + after_s);
+        match owner {
+            Some(k) => mine[k].push(d.clone()),
+            None => false_confirmations.push((d.event.clone(), d.t_s)),
+        }
+    }
+    let events = labelled
+        .iter()
+        .zip(&mine)
+        .map(|(l, ds)| {
+            let outcome = classify(Some((&l.event, l.onset_s)), ds);
+            (l.event.clone(), l.onset_s, outcome)
+        })
+        .collect();
+    // The windows' union within the span, from the windows in onset order.
+    let (start, end) = span;
+    let mut covered = 0.0;
+    let mut reach = start;
+    for l in labelled {
+        let (a, b) = (l.onset_s.max(reach), (l.end_s + after_s).min(end));
+        if b > a {
+            covered += b - a;
+            reach = b;
+        }
+    }
+    RecordingScore {
+        events,
+        false_confirmations,
+        outside_s: (end - start - covered).max(0.0),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -267,6 +377,76 @@ mod tests {
             classify(None, &[confirm("contact", 0.05)]),
             Outcome::Wrong { .. }
         ));
+    }
+
+    fn labelled(event: &str, onset_s: f64, end_s: f64) -> Labelled {
+        Labelled {
+            event: event.into(),
+            onset_s,
+            end_s,
+        }
+    }
+
+    /// Confirmations go to the latest event whose window holds them: found, repeated,
+    /// wrong, missed, and outside every window a false confirmation; the time outside
+    /// counts overlapping windows once.
+    #[test]
+    fn recordings_are_scored_event_by_event() {
+        let events = [
+            labelled("contact", 1.0, 1.5),
+            labelled("link_collision", 3.0, 3.02),
+            labelled("contact", 3.05, 3.5),
+            labelled("disturbance", 6.0, 6.1),
+            labelled("contact", 8.0, 8.2),
+        ];
+        let decisions = [
+            confirm("contact", 0.5),
+            confirm("contact", 1.002),
+            DecisionRecord {
+                level: "alert",
+                ..confirm("disturbance", 2.0)
+            },
+            // 50 ms after the collision's end, within its 100 ms: but the contact labelled
+            // at 3.05 s is later and holds it too.
+            confirm("link_collision", 3.07),
+            confirm("contact", 3.06),
+            confirm("disturbance", 6.05),
+            confirm("disturbance", 6.15),
+            confirm("link_collision", 7.0),
+        ];
+        let s = score_recording(&events, &decisions, 0.1, (0.0, 10.0));
+        let outcomes: Vec<&Outcome> = s.events.iter().map(|e| &e.2).collect();
+        assert_eq!(
+            outcomes,
+            [
+                &Outcome::Correct {
+                    latency_s: 1.002 - 1.0
+                },
+                &Outcome::Missed,
+                &Outcome::Wrong {
+                    event: "link_collision".into(),
+                    t_s: 3.07
+                },
+                &Outcome::Repeated {
+                    confirmations: 2,
+                    latency_s: 6.05 - 6.0
+                },
+                &Outcome::Missed,
+            ]
+        );
+        assert_eq!(
+            s.false_confirmations,
+            [
+                ("contact".to_string(), 0.5),
+                ("link_collision".to_string(), 7.0)
+            ]
+        );
+        // Windows: 1.0-1.6, 3.0-3.12 and 3.05-3.6 (overlapping: 3.0-3.6), 6.0-6.2, 8.0-8.3.
+        assert!(
+            (s.outside_s - (10.0 - 0.6 - 0.6 - 0.2 - 0.3)).abs() < 1e-9,
+            "{}",
+            s.outside_s
+        );
     }
 
     #[test]

@@ -606,3 +606,104 @@ fn evaluate_bounds_its_counts() {
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     }
 }
+
+/// `evaluate --traces` on a directory of recordings: every `*.csv` under it (hidden files
+/// and other files left out), each run of a `truth` label one event. A simulated contact
+/// relabelled with a second, invented contact later on scores one right and one missed;
+/// the JSON has the simulated evaluation's fields.
+#[test]
+fn evaluate_scores_labelled_recordings() {
+    let dir = scratch("corpus");
+    let sub = dir.join("day1");
+    std::fs::create_dir_all(&sub).expect("sub dir");
+    simulate(&sub, "link_collision_8");
+    let contact = simulate(&dir, "contact_hard_8");
+    // The real contact labelled for its first 10 ms only, then an invented one in the
+    // last 10 ms, where nothing new happens.
+    let text_in = std::fs::read_to_string(&contact).expect("trace");
+    let rows = text_in.lines().filter(|l| !l.starts_with('#')).count() - 1;
+    let mut seen = 0;
+    let mut labelled = 0;
+    let relabelled: String = text_in
+        .lines()
+        .map(|l| {
+            if l.starts_with('#') || l.starts_with("t,") {
+                return format!("{l}\n");
+            }
+            seen += 1;
+            let (head, label) = l.rsplit_once(',').expect("cells");
+            let keep = label == "contact" && labelled < 50;
+            labelled += usize::from(keep);
+            let invented = seen > rows - 50;
+            let label = if keep || invented { "contact" } else { "" };
+            format!("{head},{label}\n")
+        })
+        .collect();
+    std::fs::write(&contact, relabelled).expect("written");
+    std::fs::write(dir.join(".staging.csv"), "not a trace").expect("written");
+    std::fs::write(dir.join("notes.txt"), "not a trace").expect("written");
+    let json = dir.join("out").join("report.json");
+    std::fs::create_dir_all(json.parent().expect("parent")).expect("out dir");
+    let d = dir.to_str().expect("utf-8");
+    let out = fingertip(&[
+        "evaluate",
+        "--traces",
+        d,
+        "--after-ms",
+        "5",
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}{stdout}", text(&out.stderr));
+    assert!(
+        stdout.contains("2 recordings") && stdout.contains("5 ms after"),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("parses");
+    let event = |name: &str| {
+        report["events"]
+            .as_array()
+            .and_then(|e| e.iter().find(|e| e["name"] == name))
+            .cloned()
+            .unwrap_or_default()
+    };
+    assert_eq!(
+        (
+            event("contact")["runs"].as_u64(),
+            event("contact")["correct"].as_u64()
+        ),
+        (Some(2), Some(1)),
+        "{report}"
+    );
+    assert_eq!(event("contact")["missed"].as_u64(), Some(1));
+    assert_eq!(event("link_collision")["correct"].as_u64(), Some(1));
+    assert_eq!(report["false_alarms"].as_u64(), Some(0));
+    assert!(report["false_alarms_per_hour"].is_number() && report["config"].is_string());
+
+    // Bad input: one line naming what was wrong, nothing written.
+    let empty = dir.join("empty");
+    std::fs::create_dir_all(&empty).expect("empty dir");
+    std::fs::write(dir.join("out").join("bad.csv"), "t,x\n0,1\n").expect("written");
+    for (args, expect) in [
+        (
+            vec!["--traces", "/nonexistent/day"],
+            "/nonexistent/day: cannot read",
+        ),
+        (
+            vec!["--traces", empty.to_str().expect("utf-8")],
+            "no recording",
+        ),
+        (vec!["--traces", d], "bad.csv"),
+        (vec!["--traces", d, "--after-ms=-1"], "--after-ms"),
+        (vec!["--traces", d, "--runs", "5"], "cannot be used with"),
+    ] {
+        let mut all = vec!["evaluate"];
+        all.extend(args.iter().copied());
+        let out = fingertip(&all);
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{args:?} accepted");
+        assert!(stderr.contains(expect), "{args:?}: {stderr}");
+    }
+}

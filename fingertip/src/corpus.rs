@@ -1,0 +1,249 @@
+//! Recorded corpora: `fingertip evaluate --traces`, the detector scored on labelled
+//! recordings from a real robot instead of simulated runs.
+//!
+//! A recording is a trace whose `truth` column may label many events, each a maximal run of
+//! rows with the same label ([`crate::replay::Labelled`]). Every recording is replayed
+//! (streamed, any length) and scored by [`score_recording`]: each labelled event gets an
+//! [`Outcome`] as a simulated run does, and a confirmation outside every event's window is
+//! a false confirmation. The report is tallied per event name, with the same fields as a
+//! simulated evaluation's scenarios.
+
+use std::path::{Path, PathBuf};
+
+use crate::score::{Outcome, RecordingScore, ScenarioReport, score_recording};
+
+pub use crate::replay::Labelled;
+
+/// The default time after a labelled event's end during which a confirmation still
+/// counts for it (ms): a label may end before the detector has confirmed a short event.
+pub const DEFAULT_AFTER_MS: f64 = 100.0;
+
+/// Failures listed per event name in a printed report.
+const SHOWN_FAILURES: usize = 3;
+
+/// Why a corpus could not be gathered.
+#[derive(Debug, thiserror::Error)]
+pub enum CorpusError {
+    /// A path given does not exist or cannot be listed.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// The path.
+        path: String,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// No recording was found.
+    #[error("{0}: no recording (`*.csv`) found")]
+    Empty(String),
+}
+
+/// The recordings named by `paths`: files as given, and every `*.csv` file under each
+/// directory (recursively, hidden entries skipped), each directory's in name order.
+pub fn find_recordings(paths: &[PathBuf]) -> Result<Vec<PathBuf>, CorpusError> {
+    let mut found = Vec::new();
+    for p in paths {
+        let meta = std::fs::metadata(p).map_err(|source| CorpusError::Read {
+            path: p.display().to_string(),
+            source,
+        })?;
+        if meta.is_dir() {
+            let before = found.len();
+            walk(p, &mut found)?;
+            if found.len() == before {
+                return Err(CorpusError::Empty(p.display().to_string()));
+            }
+        } else {
+            found.push(p.clone());
+        }
+    }
+    Ok(found)
+}
+
+fn walk(dir: &Path, found: &mut Vec<PathBuf>) -> Result<(), CorpusError> {
+    let read = |source| CorpusError::Read {
+        path: dir.display().to_string(),
+        source,
+    };
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(read)?
+        .map(|e| e.map(|e| e.path()))
+        .collect::<Result<_, _>>()
+        .map_err(read)?;
+    entries.sort();
+    for path in entries {
+        let hidden = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .is_none_or(|n| n.starts_with('.'));
+        if hidden {
+            continue;
+        }
+        if path.is_dir() {
+            walk(&path, found)?;
+        } else if path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("csv"))
+        {
+            found.push(path);
+        }
+    }
+    Ok(())
+}
+
+/// One recording replayed and scored.
+#[derive(Clone, Debug)]
+pub struct RecordingResult {
+    /// The recording's name (its path).
+    pub name: String,
+    /// Its length (s).
+    pub seconds: f64,
+    /// How it went.
+    pub score: RecordingScore,
+}
+
+impl RecordingResult {
+    /// Scores a replayed recording.
+    pub fn new(name: &str, streamed: &crate::replay::Streamed, after_s: f64) -> RecordingResult {
+        let (first, last) = streamed.span_s;
+        RecordingResult {
+            name: name.to_string(),
+            seconds: last - first,
+            score: score_recording(
+                &streamed.labelled,
+                &streamed.decisions,
+                after_s,
+                (first, last),
+            ),
+        }
+    }
+}
+
+/// A corpus's results, tallied per event name.
+#[derive(Clone, Debug)]
+pub struct CorpusReport {
+    /// One per event name labelled in the corpus, in the configuration's event order.
+    pub events: Vec<ScenarioReport>,
+    /// Recordings.
+    pub recordings: usize,
+    /// Their total length (h).
+    pub hours: f64,
+    /// Confirmations outside every event's window.
+    pub false_confirmations: usize,
+    /// The time outside every event's window (h).
+    pub outside_hours: f64,
+    /// How long after an event's end a confirmation counted for it (ms).
+    pub after_ms: f64,
+    /// What went wrong, a line each: the recording, the event and time, the outcome; the
+    /// false confirmations last.
+    pub failures: Vec<(String, String)>,
+}
+
+impl CorpusReport {
+    /// Tallies `results` for a detector with events `event_names`.
+    pub fn tally(
+        event_names: &[String],
+        results: &[RecordingResult],
+        after_ms: f64,
+    ) -> CorpusReport {
+        let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); event_names.len()];
+        let mut failures = Vec::new();
+        let mut false_alarms = Vec::new();
+        for r in results {
+            for (event, onset, outcome) in &r.score.events {
+                if let Some(i) = event_names.iter().position(|n| n == event) {
+                    outcomes[i].push(outcome.clone());
+                }
+                if !outcome.is_right() {
+                    failures.push((
+                        event.clone(),
+                        format!("{}: {event} at {:.3} s: {outcome}", r.name, onset),
+                    ));
+                }
+            }
+            for (event, t) in &r.score.false_confirmations {
+                false_alarms.push((
+                    "outside events".to_string(),
+                    format!(
+                        "{}: {event} confirmed at {t:.3} s, outside every labelled event",
+                        r.name
+                    ),
+                ));
+            }
+        }
+        let false_confirmations = false_alarms.len();
+        failures.extend(false_alarms);
+        CorpusReport {
+            events: event_names
+                .iter()
+                .zip(&outcomes)
+                .filter(|(_, o)| !o.is_empty())
+                .map(|(name, o)| ScenarioReport::tally(name, Some(name), o))
+                .collect(),
+            recordings: results.len(),
+            hours: results.iter().map(|r| r.seconds).sum::<f64>() / 3600.0,
+            false_confirmations,
+            outside_hours: results.iter().map(|r| r.score.outside_s).sum::<f64>() / 3600.0,
+            after_ms,
+            failures,
+        }
+    }
+
+    /// False confirmations per hour outside events (0 when there was no such time).
+    pub fn false_per_hour(&self) -> f64 {
+        if self.outside_hours > 0.0 {
+            self.false_confirmations as f64 / self.outside_hours
+        } else {
+            0.0
+        }
+    }
+
+    /// The report as text: a table per event name (right: confirmed once, nothing else in
+    /// its window), the false confirmations, and the first failures of each kind.
+    pub fn write(&self, out: &mut impl std::io::Write) -> std::io::Result<()> {
+        writeln!(
+            out,
+            "{} recordings, {:.3} h; a confirmation counts for an event from its onset until {} ms after its labelled end",
+            self.recordings, self.hours, self.after_ms
+        )?;
+        crate::score::write_table(out, ("event", "events"), false, &self.events)?;
+        writeln!(
+            out,
+            "false confirmations: {} in {:.3} h outside labelled events = {:.2} per hour",
+            self.false_confirmations,
+            self.outside_hours,
+            self.false_per_hour()
+        )?;
+        if !self.failures.is_empty() {
+            writeln!(
+                out,
+                "what went wrong (at most {SHOWN_FAILURES} of each kind):"
+            )?;
+            let mut shown: std::collections::HashMap<&str, usize> = Default::default();
+            for (kind, line) in &self.failures {
+                let n = shown.entry(kind).or_default();
+                *n += 1;
+                if *n <= SHOWN_FAILURES {
+                    writeln!(out, "  {line}")?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The report as JSON: the simulated evaluation's fields where they coincide (`config`,
+    /// `false_alarms`, `false_alarms_per_hour`; `events` holds what `scenarios` holds
+    /// there, one entry per event name, `runs` counting labelled events).
+    pub fn json(&self, config: &str) -> serde_json::Value {
+        serde_json::json!({
+            "config": config,
+            "recordings": self.recordings,
+            "hours": self.hours,
+            "after_ms": self.after_ms,
+            "events": self.events,
+            "false_alarms": self.false_confirmations,
+            "false_alarms_per_hour": self.false_per_hour(),
+            "outside_event_hours": self.outside_hours,
+        })
+    }
+}
