@@ -69,7 +69,7 @@ fn run(trace: &Path, out: &Path, rows: u64) -> Result<(), String> {
         fastest(|| {
             let reader = TraceReader::open(trace).map_err(|e| e.to_string())?;
             let mut ticks = 0u64;
-            replay_stream(&detector, reader, |_, _, _, _| ticks += 1).map_err(|e| e.to_string())?;
+            replay_stream(&detector, reader, |_| ticks += 1).map_err(|e| e.to_string())?;
             (ticks == rows)
                 .then_some(())
                 .ok_or_else(|| format!("{ticks} ticks for {rows} rows"))

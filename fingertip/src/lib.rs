@@ -4,6 +4,7 @@
 
 pub mod can_tools;
 pub mod corpus;
+pub mod features;
 pub mod identify;
 pub mod output;
 pub mod plot;

@@ -173,6 +173,31 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Each feature's values in labelled events and outside them, from recordings: how
+    /// well one threshold on it tells each event from the rest, and a figure.
+    Features {
+        /// Labelled recordings: trace files, or directories searched (recursively) for
+        /// `*.csv`.
+        #[arg(long, num_args = 1.., required = true)]
+        traces: Vec<PathBuf>,
+        /// Detector configuration (TOML): its features are computed; the approach
+        /// configuration when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// How long after each labelled onset a feature's values count for the event (ms).
+        #[arg(long, default_value_t = 50.0)]
+        window_ms: f64,
+        /// How long after a labelled event's end the values are left out, neither the
+        /// event's nor outside (ms).
+        #[arg(long, default_value_t = fingertip::corpus::DEFAULT_AFTER_MS)]
+        after_ms: f64,
+        /// Write the distributions, one panel per feature (.png or .svg).
+        #[arg(long)]
+        plot: Option<PathBuf>,
+        /// Also write the table as JSON here.
+        #[arg(long)]
+        json: Option<PathBuf>,
+    },
     /// Identify a self-motion cancellation (the `cancel` stage) from event-free motion: the
     /// gain and cut-off with which the low-passed commanded motion best explains a sensor.
     Identify {
@@ -326,6 +351,20 @@ fn run(cli: Cli) -> Result<()> {
             json,
             ..
         } => evaluate(runs, seed, &config, free_hours, json.as_deref()),
+        Command::Features {
+            traces,
+            config,
+            window_ms,
+            after_ms,
+            plot,
+            json,
+        } => features(
+            &traces,
+            config.as_deref(),
+            (window_ms, after_ms),
+            plot.as_deref(),
+            json.as_deref(),
+        ),
         Command::Identify {
             trace,
             input,
@@ -485,19 +524,22 @@ fn replay_cmd(
     };
     let mut figure = plot_to.map(|_| Decimated::new(detector.events(), PLOT_POINTS));
     let mut failed: Option<std::io::Error> = None;
-    let streamed = replay::replay_stream(&detector, reader, |t, row, state, output| {
+    let streamed = replay::replay_stream(&detector, reader, |tick| {
         if failed.is_some() {
             return;
         }
         let written = csv
             .as_mut()
-            .map_or(Ok(()), |w| w.row(t, state, output))
-            .and_then(|()| can.as_mut().map_or(Ok(()), |w| w.tick(t, row, output)));
+            .map_or(Ok(()), |w| w.row(tick.t, tick.state, tick.output))
+            .and_then(|()| {
+                can.as_mut()
+                    .map_or(Ok(()), |w| w.tick(tick.t, tick.row, tick.output))
+            });
         if let Err(e) = written {
             failed = Some(e);
         }
         if let Some(f) = figure.as_mut() {
-            f.push(t, output);
+            f.push(tick.t, tick.output);
         }
     })?;
     if let Some(e) = failed {
@@ -991,10 +1033,7 @@ fn run_jobs(
     base_seed: u64,
 ) -> Result<(Vec<JobResult>, f64)> {
     let jobs = Scenario::single_event().len() * runs + free_runs;
-    let bar = ProgressBar::new(jobs as u64).with_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} runs ({eta} left)")?
-            .progress_chars("=> "),
-    );
+    let bar = progress(jobs, "runs")?;
     let started = Instant::now();
     let results: Result<Vec<JobResult>> = (0..jobs)
         .into_par_iter()
@@ -1006,6 +1045,14 @@ fn run_jobs(
         .collect();
     bar.finish_and_clear();
     Ok((results?, started.elapsed().as_secs_f64()))
+}
+
+/// A progress bar over `n` things called `what`, on standard error.
+fn progress(n: usize, what: &str) -> Result<ProgressBar> {
+    let template =
+        format!("{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {what} ({{eta}} left)");
+    Ok(ProgressBar::new(n as u64)
+        .with_style(ProgressStyle::with_template(&template)?.progress_chars("=> ")))
 }
 
 /// The results of `evaluate`, tallied.
@@ -1257,8 +1304,19 @@ fn evaluate(
     Ok(())
 }
 
-/// The longest wait after a labelled event's end that `--after-ms` takes: a minute.
+/// The longest time `--after-ms` and `--window-ms` take: a minute.
 const MAX_AFTER_MS: f64 = 60_000.0;
+
+/// A time flag within 0..=[`MAX_AFTER_MS`].
+fn check_ms(flag: &str, ms: f64) -> Result<()> {
+    if !(ms.is_finite() && (0.0..=MAX_AFTER_MS).contains(&ms)) {
+        bail!(
+            "{flag} = {} must be within 0..={MAX_AFTER_MS} ms",
+            fingertip::readable(ms)
+        );
+    }
+    Ok(())
+}
 
 /// `evaluate --traces`: every recording replayed with every detector, in parallel behind a
 /// progress bar, and scored per labelled event ([`fingertip::corpus`]).
@@ -1268,23 +1326,13 @@ fn evaluate_traces(
     configs: &[PathBuf],
     json: Option<&Path>,
 ) -> Result<()> {
-    if !(after_ms.is_finite() && (0.0..=MAX_AFTER_MS).contains(&after_ms)) {
-        bail!(
-            "--after-ms = {} must be within 0..={MAX_AFTER_MS} ms",
-            fingertip::readable(after_ms)
-        );
-    }
+    check_ms("--after-ms", after_ms)?;
     let (detectors, names) = load_detectors(configs)?;
     let files = fingertip::corpus::find_recordings(paths)?;
     let inputs: Vec<&Path> = configs.iter().chain(&files).map(PathBuf::as_path).collect();
     let plan = plan_outputs(&inputs, &[json.map(|p| (p, Kind::File))])?;
     let jobs = files.len() * detectors.len();
-    let bar = ProgressBar::new(jobs as u64).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} recordings ({eta} left)",
-        )?
-        .progress_chars("=> "),
-    );
+    let bar = progress(jobs, "recordings")?;
     let started = Instant::now();
     let results: Vec<fingertip::corpus::RecordingResult> = (0..jobs)
         .into_par_iter()
@@ -1292,7 +1340,7 @@ fn evaluate_traces(
             let (file, detector) = (&files[i / detectors.len()], &detectors[i % detectors.len()]);
             let reader = TraceReader::open(file)?;
             let name = reader.name().to_string();
-            let streamed = replay::replay_stream(detector, reader, |_, _, _, _| {})?;
+            let streamed = replay::replay_stream(detector, reader, |_| {})?;
             bar.inc(1);
             Ok(fingertip::corpus::RecordingResult::new(
                 &name,
@@ -1351,6 +1399,121 @@ fn evaluate_traces(
             _ => serde_json::json!({ "configs": per_config }),
         };
         plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    }
+    plan.commit()?;
+    Ok(())
+}
+
+/// `features`: every recording replayed in parallel, each feature's values sorted into the
+/// events and the time outside them; the separability table, and the figure.
+fn features(
+    paths: &[PathBuf],
+    config: Option<&Path>,
+    (window_ms, after_ms): (f64, f64),
+    plot_to: Option<&Path>,
+    json: Option<&Path>,
+) -> Result<()> {
+    check_ms("--window-ms", window_ms)?;
+    check_ms("--after-ms", after_ms)?;
+    let (detector, config_name) = load_detector(config)?;
+    let files = fingertip::corpus::find_recordings(paths)?;
+    let inputs: Vec<&Path> = config
+        .into_iter()
+        .chain(files.iter().map(PathBuf::as_path))
+        .collect();
+    let plan = plan_outputs(
+        &inputs,
+        &[
+            plot_to.map(|p| (p, Kind::Figure)),
+            json.map(|p| (p, Kind::File)),
+        ],
+    )?;
+    let bar = progress(files.len(), "recordings")?;
+    let per_file: Vec<fingertip::features::FeatureSamples> = files
+        .par_iter()
+        .map(|f| {
+            let s = fingertip::features::sample_recording(
+                &detector,
+                f,
+                window_ms / 1e3,
+                after_ms / 1e3,
+            )?;
+            bar.inc(1);
+            Ok(s)
+        })
+        .collect::<Result<_>>()?;
+    bar.finish_and_clear();
+    let mut samples = fingertip::features::FeatureSamples::new(&detector);
+    for s in per_file {
+        samples.merge(s);
+    }
+    let table = fingertip::features::separations(&samples);
+    println!(
+        "{config_name} on {} recordings: each event's first {window_ms} ms against the time outside events ({} ticks, {} kept)",
+        files.len(),
+        samples.outside_ticks(),
+        samples.outside.first().map_or(0, Vec::len)
+    );
+    println!(
+        "{:<20} {:<16} {:>8} {:>13} {:>13}   {:<19} {:>9}",
+        "feature", "event", "ticks", "event median", "outside med.", "event is", "separates"
+    );
+    for s in &table {
+        println!(
+            "{:<20} {:<16} {:>8} {:>13} {:>13}   {:<5} {:>13} {:>7.1} %",
+            s.feature,
+            s.event,
+            s.n_event,
+            four_digits(s.event_median),
+            four_digits(s.outside_median),
+            if s.above { "above" } else { "below" },
+            four_digits(s.threshold),
+            s.balanced_accuracy * 100.0
+        );
+    }
+    println!(
+        "separates: the balanced accuracy of the best single threshold ((event ticks beyond it + outside ticks not) / 2), 50 % = no better than chance"
+    );
+    if samples.inside.iter().flatten().all(Vec::is_empty) {
+        println!("no labelled event in the recordings: only the outside distributions are drawn");
+    }
+    let mut k = 0..;
+    if plot_to.is_some() {
+        let slot = k.next().unwrap_or(0);
+        let panels: Vec<plot::FeaturePanel<'_>> = samples
+            .features
+            .iter()
+            .enumerate()
+            .map(|(f, feature)| plot::FeaturePanel {
+                feature,
+                outside: &samples.outside[f],
+                events: samples
+                    .events
+                    .iter()
+                    .enumerate()
+                    .filter(|(e, _)| !samples.inside[*e][f].is_empty())
+                    .map(|(e, event)| {
+                        let accuracy = table
+                            .iter()
+                            .find(|s| s.feature == *feature && s.event == *event)
+                            .map_or(0.5, |s| s.balanced_accuracy);
+                        (event.as_str(), samples.inside[e][f].as_slice(), accuracy)
+                    })
+                    .collect(),
+            })
+            .collect();
+        plot::write_features(plan.staging(slot), &panels)?;
+    }
+    if json.is_some() {
+        let slot = k.next().unwrap_or(0);
+        let report = serde_json::json!({
+            "config": config_name,
+            "recordings": files.len(),
+            "window_ms": window_ms,
+            "after_ms": after_ms,
+            "separations": table,
+        });
+        plan.write(slot, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     plan.commit()?;
     Ok(())

@@ -1,5 +1,6 @@
-//! Figures in the style of the paper's figure 4: each monitored event's confidence against
-//! time, with the true onset and the confirmations marked. PNG or SVG by file extension.
+//! Figures, PNG or SVG by file extension: runs in the style of the paper's figure 4 (each
+//! monitored event's confidence against time, with the true onset and the confirmations
+//! marked), and the features' distributions in and outside labelled events.
 
 use std::path::Path;
 use std::sync::Once;
@@ -62,6 +63,96 @@ fn fonts() {
     });
 }
 
+/// A figure that can be drawn on any backend.
+trait Figure {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>;
+}
+
+/// Draws `figure` at `size` pixels and writes it to `path`, PNG or SVG by its extension.
+fn write_figure(path: &Path, size: (u32, u32), figure: &impl Figure) -> Result<(), PlotError> {
+    fonts();
+    let shown = path.display().to_string();
+    let drawn = match path.extension().and_then(|e| e.to_str()) {
+        Some("png") => {
+            let root = BitMapBackend::new(path, size).into_drawing_area();
+            figure
+                .draw(&root)
+                .and_then(|()| root.present())
+                .map_err(bitmap_message)
+        }
+        Some("svg") => {
+            let root = SVGBackend::new(path, size).into_drawing_area();
+            figure
+                .draw(&root)
+                .and_then(|()| root.present())
+                .map_err(|e| e.to_string())
+        }
+        _ => return Err(PlotError::Format(shown)),
+    };
+    drawn.map_err(|message| PlotError::Draw {
+        path: shown,
+        message,
+    })
+}
+
+/// One panel of a grid figure.
+trait Panel {
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>;
+}
+
+/// Panels in a grid, `columns` wide, row by row.
+struct Grid<'p, P> {
+    panels: &'p [P],
+    columns: usize,
+}
+
+impl<P: Panel> Grid<'_, P> {
+    fn rows(&self) -> usize {
+        self.panels.len().div_ceil(self.columns).max(1)
+    }
+}
+
+impl<P: Panel> Figure for Grid<'_, P> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        root: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        root.fill(&WHITE)?;
+        for (area, panel) in root
+            .split_evenly((self.rows(), self.columns))
+            .iter()
+            .zip(self.panels)
+        {
+            panel.draw_panel(area)?;
+        }
+        Ok(())
+    }
+}
+
+impl Panel for RunPlot<'_> {
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        draw_run(area, self)
+    }
+}
+
+impl Panel for FeaturePanel<'_> {
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        draw_feature(area, self)
+    }
+}
+
 /// Writes a grid of runs (`columns` wide) to `path`, each panel `panel` pixels.
 pub fn write_grid(
     path: &Path,
@@ -69,32 +160,12 @@ pub fn write_grid(
     columns: usize,
     panel: (u32, u32),
 ) -> Result<(), PlotError> {
-    fonts();
-    let columns = columns.clamp(1, runs.len().max(1));
-    let rows = runs.len().div_ceil(columns).max(1);
-    let size = (panel.0 * columns as u32, panel.1 * rows as u32);
-    let shown = path.display().to_string();
-    let drawn = match path.extension().and_then(|e| e.to_str()) {
-        Some("png") => draw_grid(
-            &BitMapBackend::new(path, size).into_drawing_area(),
-            runs,
-            rows,
-            columns,
-        )
-        .map_err(bitmap_message),
-        Some("svg") => draw_grid(
-            &SVGBackend::new(path, size).into_drawing_area(),
-            runs,
-            rows,
-            columns,
-        )
-        .map_err(|e| e.to_string()),
-        _ => return Err(PlotError::Format(shown)),
+    let grid = Grid {
+        panels: runs,
+        columns: columns.clamp(1, runs.len().max(1)),
     };
-    drawn.map_err(|message| PlotError::Draw {
-        path: shown,
-        message,
-    })
+    let size = (panel.0 * grid.columns as u32, panel.1 * grid.rows() as u32);
+    write_figure(path, size, &grid)
 }
 
 /// What went wrong writing a PNG, as a person reads it (the backend's own text is its
@@ -116,20 +187,6 @@ fn bitmap_message(e: DrawingAreaErrorKind<plotters_bitmap::BitMapBackendError>) 
 /// Writes one run to `path`.
 pub fn write_run(path: &Path, run: &RunPlot<'_>) -> Result<(), PlotError> {
     write_grid(path, std::slice::from_ref(run), 1, (900, 420))
-}
-
-/// Draws every run into its panel of `root` and writes the file.
-fn draw_grid<DB: DrawingBackend>(
-    root: &DrawingArea<DB, Shift>,
-    runs: &[RunPlot<'_>],
-    rows: usize,
-    columns: usize,
-) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
-    root.fill(&WHITE)?;
-    for (area, run) in root.split_evenly((rows, columns)).iter().zip(runs) {
-        draw_run(area, run)?;
-    }
-    root.present()
 }
 
 fn draw_run<DB: DrawingBackend>(
@@ -210,6 +267,146 @@ fn draw_run<DB: DrawingBackend>(
         .background_style(WHITE.mix(0.85))
         .border_style(RGBColor(200, 200, 200))
         .label_font(("sans-serif", 13))
+        .draw()?;
+    Ok(())
+}
+
+/// One feature's distributions for the features figure.
+#[derive(Clone, Debug)]
+pub struct FeaturePanel<'a> {
+    /// The feature's name.
+    pub feature: &'a str,
+    /// Values outside events.
+    pub outside: &'a [f64],
+    /// Each event's name, its values and the best single threshold's balanced accuracy.
+    pub events: Vec<(&'a str, &'a [f64], f64)>,
+}
+
+/// Bins per histogram.
+const BINS: usize = 60;
+/// The lowest density drawn, relative to the highest: the log scale shows the tails, where
+/// events and the time outside them part, down to this.
+const FLOOR: f64 = 1e-5;
+
+/// Writes one panel per feature to `path`: the histogram (as a density, on a log scale) of
+/// its values outside events in grey and inside each event in the event's colour, each event's
+/// separability in the legend.
+pub fn write_features(path: &Path, panels: &[FeaturePanel<'_>]) -> Result<(), PlotError> {
+    let grid = Grid {
+        panels,
+        columns: panels.len().clamp(1, 3),
+    };
+    let size = (460 * grid.columns as u32, 300 * grid.rows() as u32);
+    write_figure(path, size, &grid)
+}
+
+/// The value at quantile `q` of sorted values.
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    let k = ((q * sorted.len() as f64) as usize).min(sorted.len().saturating_sub(1));
+    sorted.get(k).copied().unwrap_or(0.0)
+}
+
+fn draw_feature<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &FeaturePanel<'_>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    // The range holding all but the extreme 0.5 % of every set.
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    let sets: Vec<(&str, &[f64], RGBColor)> =
+        std::iter::once(("outside", panel.outside, RGBColor(120, 120, 120)))
+            .chain(
+                panel
+                    .events
+                    .iter()
+                    .enumerate()
+                    .map(|(k, (name, values, _))| (*name, *values, COLORS[k % COLORS.len()])),
+            )
+            .collect();
+    let sorted: Vec<Vec<f64>> = sets
+        .iter()
+        .map(|(_, v, _)| {
+            let mut s = v.to_vec();
+            s.sort_by(f64::total_cmp);
+            s
+        })
+        .collect();
+    for s in sorted.iter().filter(|s| !s.is_empty()) {
+        lo = lo.min(quantile(s, 0.005));
+        hi = hi.max(quantile(s, 0.995));
+    }
+    if !(lo.is_finite() && hi.is_finite()) {
+        (lo, hi) = (0.0, 1.0);
+    }
+    if hi <= lo {
+        (lo, hi) = (lo - 0.5, hi + 0.5);
+    }
+    let width = (hi - lo) / BINS as f64;
+    let density = |s: &[f64]| -> Vec<f64> {
+        let mut counts = vec![0.0; BINS];
+        for v in s {
+            let b = ((v - lo) / width).floor();
+            if (0.0..BINS as f64).contains(&b) {
+                counts[b as usize] += 1.0;
+            }
+        }
+        let total = (s.len() as f64 * width).max(f64::MIN_POSITIVE);
+        counts.iter().map(|c| c / total).collect()
+    };
+    let histograms: Vec<Vec<f64>> = sorted.iter().map(|s| density(s)).collect();
+    let top = histograms
+        .iter()
+        .flatten()
+        .copied()
+        .fold(0.0, f64::max)
+        .max(f64::MIN_POSITIVE)
+        * 1.1;
+    let mut chart = ChartBuilder::on(area)
+        .caption(
+            panel.feature,
+            ("sans-serif", 16).into_font().style(FontStyle::Bold),
+        )
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(50)
+        .build_cartesian_2d(lo..hi, (top * FLOOR..top).log_scale())?;
+    chart
+        .configure_mesh()
+        .x_labels(6)
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .y_desc("density (log)")
+        .light_line_style(RGBColor(235, 235, 235))
+        .label_style(("sans-serif", 12))
+        .draw()?;
+    for (k, ((name, values, color), h)) in sets.iter().zip(&histograms).enumerate() {
+        if values.is_empty() {
+            continue;
+        }
+        // The outline of the histogram, as steps.
+        let steps = h.iter().enumerate().flat_map(|(b, d)| {
+            let (x, d) = (lo + b as f64 * width, d.max(top * FLOOR));
+            [(x, d), (x + width, d)]
+        });
+        let label = match k.checked_sub(1).and_then(|e| panel.events.get(e)) {
+            Some((_, _, accuracy)) => {
+                format!("{name}: one threshold {:.0} %", accuracy * 100.0)
+            }
+            None => name.to_string(),
+        };
+        let color = *color;
+        chart
+            .draw_series(LineSeries::new(steps, color.stroke_width(2)))?
+            .label(label)
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font(("sans-serif", 12))
         .draw()?;
     Ok(())
 }

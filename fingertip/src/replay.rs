@@ -275,15 +275,31 @@ impl Streamed {
     }
 }
 
+/// One tick of a streamed replay, as [`replay_stream`] hands it out.
+pub struct StreamTick<'a> {
+    /// The row's time (s).
+    pub t: f64,
+    /// The row's index.
+    pub row: usize,
+    /// The detector's state after the tick.
+    pub state: &'a State,
+    /// The tick's output.
+    pub output: &'a Output,
+    /// The events labelled so far, this row's included.
+    pub labelled: &'a [Labelled],
+    /// Whether this row is labelled: then it belongs to the last of `labelled`.
+    pub in_event: bool,
+}
+
 /// Replays a trace read row by row, for recordings of any length: nothing but the levels
-/// raised is kept. `each_tick(t, row, &state, &output)` runs after every tick. Each time
+/// raised is kept. `each_tick` runs after every tick. Each time
 /// step must be within 1 % of the detector's period, and the rate over the whole trace
 /// within [`RATE_TOLERANCE`] of the detector's (checked at the end: a caller writes its
 /// outputs only once this returns).
 pub fn replay_stream<R: std::io::BufRead + Send>(
     detector: &Detector,
     reader: TraceReader<R>,
-    each_tick: impl FnMut(f64, usize, &State, &Output),
+    each_tick: impl FnMut(&StreamTick<'_>),
 ) -> Result<Streamed, StreamError> {
     std::thread::scope(|scope| replay_rows(detector, ReadAhead::spawn(scope, reader), each_tick))
 }
@@ -292,7 +308,7 @@ pub fn replay_stream<R: std::io::BufRead + Send>(
 fn replay_rows(
     detector: &Detector,
     mut reader: ReadAhead,
-    mut each_tick: impl FnMut(f64, usize, &State, &Output),
+    mut each_tick: impl FnMut(&StreamTick<'_>),
 ) -> Result<Streamed, StreamError> {
     let name = reader.name().to_string();
     let names = reader.channel_names();
@@ -347,7 +363,14 @@ fn replay_rows(
             |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
             |tick| t0 + f64::from(tick) * period,
         );
-        each_tick(r.t, row, &ticker.state, &out);
+        each_tick(&StreamTick {
+            t: r.t,
+            row,
+            state: &ticker.state,
+            output: &out,
+            labelled: &rules.labelled,
+            in_event: rules.open,
+        });
         last_t = r.t;
         last_line = r.line;
         rows += 1;
@@ -539,7 +562,7 @@ mod tests {
         ];
         let csv = text(5000.0, 10, &[], &truth);
         let reader = TraceReader::new(csv.as_bytes(), "run.csv").expect("header");
-        let streamed = replay_stream(&approach(), reader, |_, _, _, _| {}).expect("runs");
+        let streamed = replay_stream(&approach(), reader, |_| {}).expect("runs");
         let got: Vec<(&str, f64, f64)> = streamed
             .labelled
             .iter()
@@ -614,8 +637,7 @@ mod stream_tests {
             let text = trace.to_csv();
             let reader = TraceReader::new(text.as_bytes(), "run.csv").expect("header");
             let mut ticks = 0;
-            let streamed =
-                replay_stream(&detector, reader, |_, _, _, _| ticks += 1).expect("streams");
+            let streamed = replay_stream(&detector, reader, |_| ticks += 1).expect("streams");
             assert_eq!(ticks, trace.len());
             assert_eq!(streamed.rows, trace.len());
             assert_eq!(streamed.decisions.len(), whole.len(), "{scenario}");
@@ -644,7 +666,7 @@ mod stream_tests {
         let e = replay_stream(
             &detector,
             TraceReader::new(jump.as_bytes(), "j.csv").expect("header"),
-            |_, _, _, _| {},
+            |_| {},
         )
         .expect_err("refused")
         .to_string();
@@ -657,7 +679,7 @@ mod stream_tests {
         let e = replay_stream(
             &detector,
             TraceReader::new(slow.as_bytes(), "s.csv").expect("header"),
-            |_, _, _, _| {},
+            |_| {},
         )
         .expect_err("refused")
         .to_string();

@@ -707,3 +707,70 @@ fn evaluate_scores_labelled_recordings() {
         assert!(stderr.contains(expect), "{args:?}: {stderr}");
     }
 }
+
+/// `features` on a corpus of a contact and event-free motion: the stress-rate energy
+/// separates the contact almost perfectly, the figure and the JSON are written, and bad
+/// windows are refused before any work.
+#[test]
+fn features_show_what_separates_each_event() {
+    let dir = scratch("features");
+    simulate(&dir, "contact_hard_8");
+    let free = dir.join("free.csv");
+    let out = fingertip(&[
+        "simulate",
+        "free_motion",
+        "--duration",
+        "2",
+        "--out",
+        free.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let d = dir.to_str().expect("utf-8");
+    let figure = dir.join("figures").join("features.png");
+    std::fs::create_dir_all(figure.parent().expect("parent")).expect("dir");
+    let json = dir.join("figures").join("features.json");
+    let out = fingertip(&[
+        "features",
+        "--traces",
+        d,
+        "--window-ms",
+        "20",
+        "--plot",
+        figure.to_str().expect("utf-8"),
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}{stdout}", text(&out.stderr));
+    assert!(std::fs::metadata(&figure).expect("figure").len() > 10_000);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("parses");
+    let separations = report["separations"].as_array().expect("a list");
+    let stress = separations
+        .iter()
+        .find(|s| s["feature"] == "ste_stress" && s["event"] == "contact")
+        .expect("ste_stress judged against the contact");
+    assert!(
+        stress["balanced_accuracy"].as_f64() > Some(0.95),
+        "{stress}"
+    );
+    assert_eq!(stress["above"], true);
+    // 20 ms at 5 kHz after the contact's onset (both ends counted).
+    assert_eq!(stress["n_event"].as_u64(), Some(101));
+    // Only the contact is labelled: no other event is judged.
+    assert!(separations.iter().all(|s| s["event"] == "contact"));
+    for (args, expect) in [
+        (
+            vec!["features", "--traces", d, "--window-ms=-5"],
+            "--window-ms",
+        ),
+        (
+            vec!["features", "--traces", d, "--plot", "x.jpg"],
+            ".png or .svg",
+        ),
+    ] {
+        let out = fingertip(&args);
+        assert!(!out.status.success(), "{args:?} accepted");
+        assert!(text(&out.stderr).contains(expect), "{}", text(&out.stderr));
+    }
+}

@@ -1,0 +1,288 @@
+//! What each feature does around labelled events: `fingertip features --traces`.
+//!
+//! Every recording is replayed and each tick's feature values are sorted into the event
+//! they fall in (the first `window` after a labelled onset) or into "outside" (ticks in no
+//! event's window: not labelled, and more than `after` past the last event's end); ticks
+//! later in an event, or in its tail, are left out. For each (feature, event) pair the best
+//! single threshold between the event's values and the outside ones says how well the
+//! feature alone separates them ([`Separation`]).
+
+use std::path::Path;
+
+use detector_core::Detector;
+
+use crate::replay::{StreamError, replay_stream};
+use crate::trace::TraceReader;
+
+/// The most values kept per feature outside events: beyond twice as many, every other one
+/// is dropped and the stride doubles, so memory stays bounded for a corpus of any length.
+const OUTSIDE_CAP: usize = 1 << 18;
+
+/// Feature values inside events and outside them, per feature.
+#[derive(Clone, Debug, Default)]
+pub struct FeatureSamples {
+    /// The features, in the configuration's order.
+    pub features: Vec<String>,
+    /// The events, in the configuration's order.
+    pub events: Vec<String>,
+    /// `inside[event][feature]`: every value in the first `window` after each onset.
+    pub inside: Vec<Vec<Vec<f64>>>,
+    /// `outside[feature]`: values outside every event, one tick in `outside_stride`.
+    pub outside: Vec<Vec<f64>>,
+    /// How many outside ticks each kept value stands for (a power of two).
+    pub outside_stride: usize,
+    /// Outside ticks seen.
+    outside_seen: usize,
+}
+
+impl FeatureSamples {
+    /// No samples yet, for `detector`'s features and events.
+    pub fn new(detector: &Detector) -> FeatureSamples {
+        let features: Vec<String> = detector.features().iter().map(|n| n.to_string()).collect();
+        let events: Vec<String> = detector.events().iter().map(|n| n.to_string()).collect();
+        FeatureSamples {
+            inside: vec![vec![Vec::new(); features.len()]; events.len()],
+            outside: vec![Vec::new(); features.len()],
+            outside_stride: 1,
+            outside_seen: 0,
+            features,
+            events,
+        }
+    }
+
+    fn push_outside(&mut self, values: &[f64]) {
+        if self.outside_seen.is_multiple_of(self.outside_stride) {
+            for (column, v) in self.outside.iter_mut().zip(values) {
+                column.push(*v);
+            }
+            if self
+                .outside
+                .first()
+                .is_some_and(|c| c.len() >= 2 * OUTSIDE_CAP)
+            {
+                for column in &mut self.outside {
+                    *column = column.iter().copied().step_by(2).collect();
+                }
+                self.outside_stride *= 2;
+            }
+        }
+        self.outside_seen += 1;
+    }
+
+    /// Adds another recording's samples; the outside ones are thinned to the coarser of
+    /// the two strides.
+    pub fn merge(&mut self, other: FeatureSamples) {
+        for (mine, theirs) in self.inside.iter_mut().zip(other.inside) {
+            for (m, t) in mine.iter_mut().zip(theirs) {
+                m.extend(t);
+            }
+        }
+        let stride = self.outside_stride.max(other.outside_stride);
+        let (own_step, their_step) = (stride / self.outside_stride, stride / other.outside_stride);
+        for (mine, theirs) in self.outside.iter_mut().zip(other.outside) {
+            *mine = mine
+                .iter()
+                .copied()
+                .step_by(own_step)
+                .chain(theirs.into_iter().step_by(their_step))
+                .collect();
+        }
+        self.outside_stride = stride;
+        self.outside_seen += other.outside_seen;
+    }
+
+    /// Outside ticks seen, kept or not.
+    pub fn outside_ticks(&self) -> usize {
+        self.outside_seen
+    }
+}
+
+/// Replays one recording and sorts its ticks' feature values: a labelled row within
+/// `window_s` of its event's onset goes to that event, an unlabelled row more than
+/// `after_s` past the last event's end goes outside.
+pub fn sample_recording(
+    detector: &Detector,
+    file: &Path,
+    window_s: f64,
+    after_s: f64,
+) -> Result<FeatureSamples, StreamError> {
+    let mut samples = FeatureSamples::new(detector);
+    let mut values = vec![0.0; samples.features.len()];
+    let reader = TraceReader::open(file)?;
+    replay_stream(detector, reader, |tick| {
+        for (k, v) in values.iter_mut().enumerate() {
+            *v = tick.state.feature(k).map_or(0.0, |x| x.to_f64());
+        }
+        match tick.labelled.last() {
+            Some(event) if tick.in_event => {
+                let index = samples.events.iter().position(|e| *e == event.event);
+                if let Some(e) = index
+                    && tick.t - event.onset_s <= window_s
+                {
+                    for (column, v) in samples.inside[e].iter_mut().zip(&values) {
+                        column.push(*v);
+                    }
+                }
+            }
+            Some(event) if tick.t <= event.end_s + after_s => {}
+            _ => samples.push_outside(&values),
+        }
+    })?;
+    Ok(samples)
+}
+
+/// How well one feature alone tells one event from the time outside events: the single
+/// threshold that does it best.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Separation {
+    /// The feature.
+    pub feature: String,
+    /// The event.
+    pub event: String,
+    /// Values in the event, and outside (kept ones).
+    pub n_event: usize,
+    /// Kept values outside events.
+    pub n_outside: usize,
+    /// The median in the event and outside.
+    pub event_median: f64,
+    /// The median outside events.
+    pub outside_median: f64,
+    /// The best threshold.
+    pub threshold: f64,
+    /// Whether the event lies above it (else below).
+    pub above: bool,
+    /// Balanced accuracy at that threshold, (true-positive rate + true-negative rate) / 2,
+    /// in [0.5, 1]: 0.5 means the feature alone says nothing, 1 that it separates fully.
+    pub balanced_accuracy: f64,
+}
+
+/// The median of sorted values (0 when empty).
+fn median(sorted: &[f64]) -> f64 {
+    match sorted.len() {
+        0 => 0.0,
+        n if n % 2 == 1 => sorted[n / 2],
+        n => (sorted[n / 2 - 1] + sorted[n / 2]) / 2.0,
+    }
+}
+
+/// The best single threshold between `event` and `outside` values (both sorted): every
+/// value is tried as the boundary, in both directions.
+pub fn best_threshold(event: &[f64], outside: &[f64]) -> (f64, bool, f64) {
+    if event.is_empty() || outside.is_empty() {
+        return (0.0, true, 0.5);
+    }
+    let (ne, no) = (event.len() as f64, outside.len() as f64);
+    let mut best = (0.0, true, 0.5);
+    // Walk the merged values: at each distinct value v, the fraction of each set that is
+    // at or below v.
+    let (mut i, mut j) = (0, 0);
+    while i < event.len() || j < outside.len() {
+        let v = match (event.get(i), outside.get(j)) {
+            (Some(&a), Some(&b)) => a.min(b),
+            (Some(&a), None) => a,
+            (None, Some(&b)) => b,
+            (None, None) => break,
+        };
+        while event.get(i).is_some_and(|&x| x <= v) {
+            i += 1;
+        }
+        while outside.get(j).is_some_and(|&x| x <= v) {
+            j += 1;
+        }
+        let (event_below, outside_below) = (i as f64 / ne, j as f64 / no);
+        // Event above v: hits are the event's values above, correct rejections the
+        // outside ones at or below.
+        let above = ((1.0 - event_below) + outside_below) / 2.0;
+        let below = (event_below + (1.0 - outside_below)) / 2.0;
+        if above > best.2 {
+            best = (v, true, above);
+        }
+        if below > best.2 {
+            best = (v, false, below);
+        }
+    }
+    best
+}
+
+/// Every (feature, event) pair with values in the event, feature by feature.
+pub fn separations(samples: &FeatureSamples) -> Vec<Separation> {
+    let sorted = |v: &[f64]| {
+        let mut s = v.to_vec();
+        s.sort_by(f64::total_cmp);
+        s
+    };
+    let outside: Vec<Vec<f64>> = samples.outside.iter().map(|v| sorted(v)).collect();
+    let mut out = Vec::new();
+    for (f, feature) in samples.features.iter().enumerate() {
+        for (e, event) in samples.events.iter().enumerate() {
+            let inside = sorted(&samples.inside[e][f]);
+            if inside.is_empty() {
+                continue;
+            }
+            let (threshold, above, balanced_accuracy) = best_threshold(&inside, &outside[f]);
+            out.push(Separation {
+                feature: feature.clone(),
+                event: event.clone(),
+                n_event: inside.len(),
+                n_outside: outside[f].len(),
+                event_median: median(&inside),
+                outside_median: median(&outside[f]),
+                threshold,
+                above,
+                balanced_accuracy,
+            });
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_best_threshold_separates_what_can_be_separated() {
+        // Fully apart, the event above.
+        let (t, above, acc) = best_threshold(&[5.0, 6.0, 7.0], &[1.0, 2.0, 3.0]);
+        assert_eq!((t, above, acc), (3.0, true, 1.0));
+        // Fully apart, the event below.
+        let (t, above, acc) = best_threshold(&[-3.0, -2.0], &[0.0, 1.0, 2.0]);
+        assert_eq!((t, above, acc), (-2.0, false, 1.0));
+        // The same values: nothing better than chance.
+        let (_, _, acc) = best_threshold(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]);
+        assert_eq!(acc, 0.5);
+        // One outside value among the event's: 3 of 4 outside below 4.5, all event above.
+        let (t, above, acc) = best_threshold(&[5.0, 6.0], &[1.0, 2.0, 3.0, 5.5]);
+        assert_eq!((t, above), (3.0, true));
+        assert!((acc - (1.0 + 0.75) / 2.0).abs() < 1e-12);
+        assert_eq!(best_threshold(&[], &[1.0]).2, 0.5);
+    }
+
+    #[test]
+    fn outside_values_thin_evenly_and_merge_at_the_coarser_stride() {
+        let mut a = FeatureSamples {
+            features: vec!["f".into()],
+            outside: vec![Vec::new()],
+            outside_stride: 1,
+            ..FeatureSamples::default()
+        };
+        for k in 0..(2 * OUTSIDE_CAP + 10) {
+            a.push_outside(&[k as f64]);
+        }
+        assert_eq!(a.outside_stride, 2);
+        assert_eq!(a.outside_ticks(), 2 * OUTSIDE_CAP + 10);
+        assert!(a.outside[0].iter().all(|v| (*v as usize).is_multiple_of(2)));
+        assert_eq!(a.outside[0].len(), OUTSIDE_CAP + 5);
+        let b = FeatureSamples {
+            features: vec!["f".into()],
+            outside: vec![vec![1.0, 2.0, 3.0, 4.0]],
+            outside_stride: 1,
+            outside_seen: 4,
+            ..FeatureSamples::default()
+        };
+        a.merge(b);
+        assert_eq!(a.outside_stride, 2);
+        assert_eq!(a.outside[0].len(), OUTSIDE_CAP + 5 + 2);
+        assert_eq!(a.outside[0][OUTSIDE_CAP + 5..], [1.0, 3.0]);
+    }
+}
