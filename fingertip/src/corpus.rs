@@ -130,6 +130,11 @@ pub struct CorpusReport {
     pub hours: f64,
     /// Confirmations outside every event's window.
     pub false_confirmations: usize,
+    /// ... of each of the configuration's events, in its order.
+    pub false_by_event: Vec<usize>,
+    /// Labelled events of another name in which each of the configuration's events was
+    /// the (first) wrong confirmation, in its order.
+    pub intrusions_by_event: Vec<usize>,
     /// The time outside every event's window (h).
     pub outside_hours: f64,
     /// How long after an event's end a confirmation counted for it (ms).
@@ -149,8 +154,17 @@ impl CorpusReport {
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); event_names.len()];
         let mut failures = Vec::new();
         let mut false_alarms = Vec::new();
+        let mut false_by_event = vec![0; event_names.len()];
+        let mut intrusions_by_event = vec![0; event_names.len()];
         for r in results {
             for (event, onset, outcome) in &r.score.events {
+                if let Outcome::Wrong {
+                    event: intruder, ..
+                } = outcome
+                    && let Some(i) = event_names.iter().position(|n| n == intruder)
+                {
+                    intrusions_by_event[i] += 1;
+                }
                 if let Some(i) = event_names.iter().position(|n| n == event) {
                     outcomes[i].push(outcome.clone());
                 }
@@ -162,6 +176,9 @@ impl CorpusReport {
                 }
             }
             for (event, t) in &r.score.false_confirmations {
+                if let Some(i) = event_names.iter().position(|n| n == event) {
+                    false_by_event[i] += 1;
+                }
                 false_alarms.push((
                     "outside events".to_string(),
                     format!(
@@ -183,6 +200,8 @@ impl CorpusReport {
             recordings: results.len(),
             hours: results.iter().map(|r| r.seconds).sum::<f64>() / 3600.0,
             false_confirmations,
+            false_by_event,
+            intrusions_by_event,
             outside_hours: results.iter().map(|r| r.score.outside_s).sum::<f64>() / 3600.0,
             after_ms,
             failures,

@@ -5,6 +5,7 @@
 pub mod can_tools;
 pub mod corpus;
 pub mod features;
+pub mod fit;
 pub mod identify;
 pub mod output;
 pub mod plot;

@@ -198,6 +198,36 @@ enum Command {
         #[arg(long)]
         json: Option<PathBuf>,
     },
+    /// Fit a configuration's numbers to labelled recordings, keeping its structure: every
+    /// term's CDF, the sensor weights and the confirm levels (docs/recordings.md), with
+    /// cross-validated figures by recording.
+    Fit {
+        /// Labelled recordings: trace files, or directories searched (recursively) for
+        /// `*.csv`.
+        #[arg(long, num_args = 1.., required = true)]
+        traces: Vec<PathBuf>,
+        /// The configuration whose structure is kept (TOML); the approach configuration
+        /// when absent.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Where to write the fitted configuration (TOML).
+        #[arg(long)]
+        out: PathBuf,
+        /// How long after each labelled onset a feature's values count for the event (ms):
+        /// what the detector has to decide on.
+        #[arg(long, default_value_t = 20.0)]
+        window_ms: f64,
+        /// How long after a labelled event's end a confirmation still counts for it (ms).
+        #[arg(long, default_value_t = fingertip::corpus::DEFAULT_AFTER_MS)]
+        after_ms: f64,
+        /// False confirmations per hour outside events that the levels may cost, shared
+        /// among the labelled events.
+        #[arg(long, default_value_t = 1.0)]
+        budget: f64,
+        /// Folds of the cross-validation, by recording (0 or 1: none).
+        #[arg(long, default_value_t = 5)]
+        folds: usize,
+    },
     /// Identify a self-motion cancellation (the `cancel` stage) from event-free motion: the
     /// gain and cut-off with which the low-passed commanded motion best explains a sensor.
     Identify {
@@ -364,6 +394,25 @@ fn run(cli: Cli) -> Result<()> {
             (window_ms, after_ms),
             plot.as_deref(),
             json.as_deref(),
+        ),
+        Command::Fit {
+            traces,
+            config,
+            out,
+            window_ms,
+            after_ms,
+            budget,
+            folds,
+        } => fit(
+            &traces,
+            config.as_deref(),
+            &out,
+            fingertip::fit::FitOptions {
+                window_s: window_ms / 1e3,
+                after_s: after_ms / 1e3,
+                budget_per_hour: budget,
+            },
+            folds,
         ),
         Command::Identify {
             trace,
@@ -1516,6 +1565,126 @@ fn features(
         plan.write(slot, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     plan.commit()?;
+    Ok(())
+}
+
+/// The most folds `fit` cross-validates with.
+const MAX_FOLDS: usize = 20;
+
+/// One line of a fit's figures: events right of those labelled, per event, and the false
+/// confirmations per hour.
+fn fit_figures(report: &fingertip::corpus::CorpusReport) -> String {
+    let mut line = String::new();
+    for r in &report.events {
+        let _ = write!(line, "{} {}/{}  ", r.name, r.correct, r.runs);
+    }
+    let _ = write!(
+        line,
+        "false {} in {:.3} h = {:.2}/h",
+        report.false_confirmations,
+        report.outside_hours,
+        report.false_per_hour()
+    );
+    line
+}
+
+/// `fit`: cross-validated by recording, then fitted on every recording and written.
+fn fit(
+    paths: &[PathBuf],
+    config: Option<&Path>,
+    out: &Path,
+    options: fingertip::fit::FitOptions,
+    folds: usize,
+) -> Result<()> {
+    use fingertip::fit;
+    check_ms("--window-ms", options.window_s * 1e3)?;
+    check_ms("--after-ms", options.after_s * 1e3)?;
+    if !(options.budget_per_hour.is_finite() && (0.0..=1e6).contains(&options.budget_per_hour)) {
+        bail!(
+            "--budget = {} must be within 0..=1e6 false confirmations per hour",
+            fingertip::readable(options.budget_per_hour)
+        );
+    }
+    if folds > MAX_FOLDS {
+        bail!("--folds = {folds} must be within 0..={MAX_FOLDS}");
+    }
+    let (base_text, base_name) = match config {
+        Some(p) => (
+            std::fs::read_to_string(p).with_context(|| p.display().to_string())?,
+            p.display().to_string(),
+        ),
+        None => (
+            fingertip::APPROACH_TOML.to_string(),
+            "configs/approach.toml".to_string(),
+        ),
+    };
+    let base = Config::from_toml(&base_text).with_context(|| base_name.clone())?;
+    let (detector, _) = load_detector(config)?;
+    let files = fingertip::corpus::find_recordings(paths)?;
+    let inputs: Vec<&Path> = config
+        .into_iter()
+        .chain(files.iter().map(PathBuf::as_path))
+        .collect();
+    let plan = plan_outputs(&inputs, &[Some((out, Kind::File))])?;
+    println!("fitting {base_name} on {} recordings", files.len());
+    let samples = fit::sample_all(&detector, &files, &options)?;
+    let k = folds.min(files.len());
+    if k >= 2 {
+        println!("cross-validation, {k} folds by recording (recording i in fold i mod {k}):");
+        for fold in 0..k {
+            let pick = |held: bool| -> (Vec<PathBuf>, Vec<fingertip::features::FeatureSamples>) {
+                files
+                    .iter()
+                    .zip(&samples)
+                    .enumerate()
+                    .filter(|(i, _)| (i % k == fold) == held)
+                    .map(|(_, (f, s))| (f.clone(), s.clone()))
+                    .unzip()
+            };
+            let (train, train_samples) = pick(false);
+            let (test, _) = pick(true);
+            let (fitted, _) = fit::fit(&base, &detector, &train, &train_samples, &options)
+                .with_context(|| format!("fold {}", fold + 1))?;
+            let trained = fit::score(&fitted, &train, options.after_s)?;
+            let held = fit::score(&fitted, &test, options.after_s)?;
+            let base_held = fit::score(&base, &test, options.after_s)?;
+            println!(
+                "  fold {}: {} training, {} held out",
+                fold + 1,
+                train.len(),
+                test.len()
+            );
+            println!("    fitted, training:  {}", fit_figures(&trained));
+            println!("    fitted, held out:  {}", fit_figures(&held));
+            println!("    base,   held out:  {}", fit_figures(&base_held));
+        }
+    }
+    let (fitted, notes) = fit::fit(&base, &detector, &files, &samples, &options)?;
+    let all = fit::score(&fitted, &files, options.after_s)?;
+    let base_all = fit::score(&base, &files, options.after_s)?;
+    println!("on every recording (training figures):");
+    println!("    fitted: {}", fit_figures(&all));
+    println!("    base:   {}", fit_figures(&base_all));
+    let header = vec![
+        format!(
+            "Fitted by `fingertip fit` from {base_name} on {} labelled recordings: each",
+            files.len()
+        ),
+        format!(
+            "event's first {} ms against the time outside events, confirmations counted until {} ms",
+            options.window_s * 1e3,
+            options.after_s * 1e3
+        ),
+        format!(
+            "after a labelled end, false confirmations within {} per hour. Structure as the base.",
+            options.budget_per_hour
+        ),
+        String::new(),
+    ];
+    let text = fit::write_toml(&base_text, &fitted, &notes, &header)?;
+    plan.write(0, text.as_bytes())?;
+    plan.commit()?;
+    println!("written: {}", out.display());
     Ok(())
 }
 

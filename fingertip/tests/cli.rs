@@ -774,3 +774,102 @@ fn features_show_what_separates_each_event() {
         assert!(text(&out.stderr).contains(expect), "{}", text(&out.stderr));
     }
 }
+
+/// `fit` keeps the base's structure and writes a configuration that loads, replays and
+/// scores at least as the base on its corpus; every fitted item says what set it; a
+/// feature that cannot tell its event from the rest stops the fit with the figures, and
+/// nothing is written.
+#[test]
+fn fit_writes_a_configuration_that_runs() {
+    let dir = scratch("fit");
+    let corpus = dir.join("corpus");
+    std::fs::create_dir_all(&corpus).expect("corpus dir");
+    for scenario in ["contact_hard_8", "disturbance_large_5"] {
+        for seed in 1..=4 {
+            let path = corpus.join(format!("{scenario}_{seed}.csv"));
+            let out = fingertip(&[
+                "simulate",
+                scenario,
+                "--randomize",
+                "--seed",
+                &seed.to_string(),
+                "--out",
+                path.to_str().expect("utf-8"),
+            ]);
+            assert!(out.status.success(), "{}", text(&out.stderr));
+        }
+    }
+    let c = corpus.to_str().expect("utf-8");
+    let fitted = dir.join("fitted.toml");
+    let f = fitted.to_str().expect("utf-8");
+    let out = fingertip(&["fit", "--traces", c, "--out", f, "--folds", "2"]);
+    let stdout = text(&out.stdout);
+    assert!(out.status.success(), "{}{stdout}", text(&out.stderr));
+    assert!(
+        stdout.contains("fold 2") && stdout.contains("held out"),
+        "{stdout}"
+    );
+    let toml = std::fs::read_to_string(&fitted).expect("written");
+    assert!(toml.starts_with("# Fitted by `fingertip fit`"), "{toml}");
+    assert!(toml.contains("# fitted sensor:") && toml.contains("# fitted confirm:"));
+    // The link collision is not labelled: its numbers are the base's.
+    let base = std::fs::read_to_string(format!(
+        "{}/../configs/approach.toml",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .expect("base");
+    let block = |t: &str| {
+        let start = t.find("name = \"link_collision\"").expect("the event");
+        t[start..start + 300].to_string()
+    };
+    assert_eq!(block(&toml), block(&base));
+    let json = dir.join("scores.json");
+    let out = fingertip(&[
+        "evaluate",
+        "--traces",
+        c,
+        "--config",
+        f,
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("parses");
+    let right: u64 = report["events"]
+        .as_array()
+        .expect("events")
+        .iter()
+        .filter_map(|e| e["correct"].as_u64())
+        .sum();
+    assert!(right >= 7, "{report}");
+
+    // A contact judged by the commanded acceleration alone: it cannot tell contacts apart.
+    let bad = dir.join("bad.toml");
+    let replaced = base.replacen(
+        "{ feature = \"ste_stress\", weight = 0.75",
+        "{ feature = \"acc_des\", weight = 0.75",
+        1,
+    );
+    assert_ne!(replaced, base);
+    std::fs::write(&bad, replaced).expect("written");
+    let refused = dir.join("refused.toml");
+    let out = fingertip(&[
+        "fit",
+        "--traces",
+        c,
+        "--config",
+        bad.to_str().expect("utf-8"),
+        "--out",
+        refused.to_str().expect("utf-8"),
+        "--folds",
+        "0",
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("`acc_des` does not separate event `contact`"),
+        "{stderr}"
+    );
+    assert!(!refused.exists());
+}

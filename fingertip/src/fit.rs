@@ -1,0 +1,785 @@
+//! `fingertip fit`: a configuration's numbers fitted to labelled recordings, its structure
+//! kept.
+//!
+//! The user's configuration says which channels, features, events and phases there are
+//! and which feature judges which event, as context or as sensor. The fit keeps all of
+//! that and sets the numbers from the corpus ([`crate::features`] sorts each feature's
+//! values into the first `window` of each labelled event and the time outside events):
+//!
+//! - **Sensor terms** (evidence for the event): a rising sigmoid from where the time
+//!   outside events ends (its 99.9 % quantile, over the ticks the event's base context
+//!   lets through) to where the event's first quarter is (its 25 % quantile in the
+//!   window); falling, mirrored, when the base's is. A term whose feature does not
+//!   separate the event (balanced accuracy of the best single threshold below
+//!   [`MIN_SEPARATION`]) stops the fit with the figures.
+//! - **Weights**: in proportion to each sensor term's separation above chance from the
+//!   time outside events and from every other labelled event, the weakest of these,
+//!   summing to the base's total (the base's weights when no term separates).
+//! - **Context terms** (permission, placed by the user for physical reasons a corpus may
+//!   not show, such as a veto on sudden commanded motion): kept, and widened only where
+//!   the event's own central 95 % lies beyond the confidence they give.
+//! - **Levels**: every event's confirm level and dwell from a grid, the combination that
+//!   gets the most events right while its false confirmations stay within the budget per
+//!   hour; the alert and the `off` levels keep their ratios to `on`, the holds are kept.
+//!
+//! Fitted numbers are rounded to four significant digits, so that the file written is
+//! exactly the configuration that was scored.
+
+use std::path::PathBuf;
+
+use detector_build::{Config, EventSpec, LevelSpec};
+use detector_core::CdfSpec;
+use detector_core::Detector;
+use rayon::prelude::*;
+
+use crate::corpus::{CorpusReport, RecordingResult};
+use crate::features::{FeatureSamples, best_threshold, sample_recording};
+use crate::replay::{StreamError, replay_stream};
+use crate::trace::TraceReader;
+
+/// The least balanced accuracy of a sensor term's feature against its event for the fit
+/// to use it: 0.6, a little better than chance.
+pub const MIN_SEPARATION: f64 = 0.6;
+
+/// The fewest outside ticks an event's context must let through for its sensor terms to
+/// be fitted against those alone.
+const MIN_LET_THROUGH: usize = 1000;
+
+/// The confirm levels tried.
+const CONFIRM_ON: [f32; 13] = [
+    0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9,
+];
+/// The confirm dwells tried (ms).
+const DWELL_MS: [f32; 5] = [0.0, 0.4, 1.0, 2.0, 5.0];
+
+/// How to fit.
+#[derive(Clone, Copy, Debug)]
+pub struct FitOptions {
+    /// How long after each labelled onset the event's feature values are taken (s).
+    pub window_s: f64,
+    /// How long after a labelled event's end a confirmation still counts for it (s).
+    pub after_s: f64,
+    /// The false confirmations per hour outside events that the levels may cost.
+    pub budget_per_hour: f64,
+}
+
+/// Why a fit failed.
+#[derive(Debug, thiserror::Error)]
+pub enum FitError {
+    /// A recording could not be replayed.
+    #[error(transparent)]
+    Stream(#[from] StreamError),
+    /// A configuration could not be built.
+    #[error("{0}")]
+    Config(String),
+    /// A sensor term's feature does not separate its event from the time outside events.
+    #[error(
+        "feature `{feature}` does not separate event `{event}` from the time outside events: the best single threshold ({threshold}) tells them apart in {:.1} % (balanced accuracy; {:.0} % at least is needed). In the event's first window its median is {event_median}, outside {outside_median}. Choose another feature for this term, or label more events",
+        accuracy * 100.0,
+        MIN_SEPARATION * 100.0
+    )]
+    NoSeparation {
+        /// The feature.
+        feature: String,
+        /// The event.
+        event: String,
+        /// The best threshold.
+        threshold: f32,
+        /// Its balanced accuracy.
+        accuracy: f64,
+        /// The medians.
+        event_median: f32,
+        /// ... outside events.
+        outside_median: f32,
+    },
+}
+
+/// A fitted number's explanation, for the comment beside it in the file written.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    /// The event.
+    pub event: String,
+    /// What it explains: `context`, `sensor`, `confirm` or `skipped`.
+    pub item: &'static str,
+    /// The explanation, one line.
+    pub text: String,
+}
+
+/// Rounds to four significant digits, as written to the file.
+fn round4(v: f64) -> f32 {
+    if v == 0.0 || !v.is_finite() {
+        return 0.0;
+    }
+    let digits = 3 - v.abs().log10().floor() as i32;
+    let scale = 10f64.powi(digits);
+    ((v * scale).round() / scale) as f32
+}
+
+/// The value at quantile `p` of sorted values (nearest rank).
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let k = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[k - 1]
+}
+
+fn sorted(v: &[f64]) -> Vec<f64> {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s
+}
+
+/// A distance that keeps two bounds apart when the data would put them together: a
+/// thousandth of their size, or the fixed-point resolution.
+fn gap(a: f64, b: f64) -> f64 {
+    (a.abs().max(b.abs()) * 1e-3).max(1e-4)
+}
+
+/// Fits every term of every labelled event from `samples`; events without labelled
+/// examples keep the base's numbers.
+pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec<Note>), FitError> {
+    let mut config = base.clone();
+    let mut notes = Vec::new();
+    let feature_index = |name: &str| samples.features.iter().position(|f| f == name);
+    for event in &mut config.events {
+        let Some(e) = samples.events.iter().position(|n| *n == event.name) else {
+            continue;
+        };
+        if samples.inside[e].iter().all(Vec::is_empty) {
+            notes.push(Note {
+                event: event.name.clone(),
+                item: "skipped",
+                text: "not labelled in the corpus: its numbers are the base's".into(),
+            });
+            continue;
+        }
+        let inside = |f: usize| sorted(&samples.inside[e][f]);
+        // The outside ticks this event's base context lets through (at least half its
+        // confidence): those its sensor terms must tell it from.
+        let rows = samples.outside.first().map_or(0, Vec::len);
+        let mut allowed = vec![true; rows];
+        for term in &event.context {
+            let (Some(f), Ok(cdf)) = (
+                feature_index(&term.feature),
+                detector_core::Cdf::new(&term.cdf),
+            ) else {
+                continue;
+            };
+            for (a, v) in allowed.iter_mut().zip(&samples.outside[f]) {
+                *a &= cdf.eval(detector_core::Signal::from_f64(*v)).to_f64() >= 0.5;
+            }
+        }
+        // When the context lets almost nothing through, the sensor terms are fitted against
+        // all the time outside events.
+        let gated = allowed.iter().filter(|a| **a).count() >= MIN_LET_THROUGH;
+        let let_through = |f: usize| -> Vec<f64> {
+            sorted(
+                &samples.outside[f]
+                    .iter()
+                    .zip(&allowed)
+                    .filter(|(_, a)| **a || !gated)
+                    .map(|(v, _)| *v)
+                    .collect::<Vec<f64>>(),
+            )
+        };
+        for term in &mut event.context {
+            let Some(f) = feature_index(&term.feature) else {
+                continue;
+            };
+            let values = inside(f);
+            let (cdf, text) = fit_context(&term.cdf, &values);
+            term.cdf = cdf;
+            notes.push(Note {
+                event: event.name.clone(),
+                item: "context",
+                text: format!("{}: {text}", term.feature),
+            });
+        }
+        let total: f32 = event.sensor.iter().map(|t| t.weight).sum();
+        let mut strengths = Vec::new();
+        for term in &mut event.sensor {
+            let Some(f) = feature_index(&term.feature) else {
+                continue;
+            };
+            let values = inside(f);
+            let others = let_through(f);
+            let (threshold, above, accuracy) = best_threshold(&values, &others);
+            if accuracy < MIN_SEPARATION {
+                return Err(FitError::NoSeparation {
+                    feature: term.feature.clone(),
+                    event: event.name.clone(),
+                    threshold: round4(threshold),
+                    accuracy,
+                    event_median: round4(quantile(&values, 0.5)),
+                    outside_median: round4(quantile(&others, 0.5)),
+                });
+            }
+            let falling = matches!(term.cdf, CdfSpec::Sigmoid { falling: true, .. });
+            let (cdf, text) = fit_sensor(falling, &values, &others, (threshold, above));
+            term.cdf = cdf;
+            // How well it tells the event from each other labelled event, on its side.
+            let mut weakest = (accuracy, "the time outside events".to_string());
+            for (o, other) in samples.events.iter().enumerate() {
+                let theirs = sorted(&samples.inside[o][f]);
+                if o == e || theirs.is_empty() {
+                    continue;
+                }
+                let (_, side, acc) = best_threshold(&values, &theirs);
+                let acc = if side != falling { acc } else { 0.5 };
+                if acc < weakest.0 {
+                    weakest = (acc, format!("`{other}`"));
+                }
+            }
+            strengths.push(weakest.0 - 0.5);
+            notes.push(Note {
+                event: event.name.clone(),
+                item: "sensor",
+                text: format!(
+                    "{}: {text}; one threshold separates {:.1} % from outside, at worst {:.1} % from {}",
+                    term.feature,
+                    accuracy * 100.0,
+                    weakest.0 * 100.0,
+                    weakest.1
+                ),
+            });
+        }
+        let sum: f64 = strengths.iter().sum();
+        if sum > 0.0 && strengths.len() == event.sensor.len() {
+            for (term, s) in event.sensor.iter_mut().zip(&strengths) {
+                term.weight = round4(f64::from(total) * s / sum);
+            }
+            // Rounding may push the sum past the base's: take it off the largest.
+            let excess: f32 = event.sensor.iter().map(|t| t.weight).sum::<f32>() - total;
+            if excess > 0.0
+                && let Some(t) = event
+                    .sensor
+                    .iter_mut()
+                    .max_by(|a, b| a.weight.total_cmp(&b.weight))
+            {
+                t.weight = round4(f64::from(t.weight - excess) - 1e-4);
+            }
+        }
+    }
+    Ok((config, notes))
+}
+
+/// A sensor term: from the end of the outside distribution to the event's median.
+fn fit_sensor(
+    falling: bool,
+    event: &[f64],
+    outside: &[f64],
+    (threshold, above): (f64, bool),
+) -> (CdfSpec, String) {
+    if !falling {
+        let mut low = quantile(outside, 0.999);
+        let mut high = quantile(event, 0.25);
+        let mut how = "from the 99.9 % quantile outside events to the event's 25 % quantile";
+        if high <= low + gap(low, high) {
+            // The event's first quarter is inside the outside tail: start where one
+            // threshold separates best and end where most of the event is.
+            low = if above { threshold } else { low };
+            high = quantile(event, 0.9).max(low + gap(low, high));
+            how = "from the best single threshold to the event's 90 % quantile (its 25 % quantile lies within the outside tail)";
+        }
+        let (low, high) = (round4(low), round4(high));
+        (
+            CdfSpec::Sigmoid {
+                low,
+                high: high.max(round4(f64::from(low) + gap(f64::from(low), 0.0))),
+                falling: false,
+            },
+            format!("rising {low}..{high}, {how}"),
+        )
+    } else {
+        let mut high = quantile(outside, 0.001);
+        let mut low = quantile(event, 0.75);
+        let mut how = "falling from the event's 75 % quantile to the 0.1 % quantile outside events";
+        if low >= high - gap(low, high) {
+            high = if above { high } else { threshold };
+            low = quantile(event, 0.1).min(high - gap(low, high));
+            how = "falling from the event's 10 % quantile to the best single threshold (its 75 % quantile lies within the outside tail)";
+        }
+        let (low, high) = (round4(low), round4(high));
+        (
+            CdfSpec::Sigmoid {
+                low,
+                high,
+                falling: true,
+            },
+            format!("falling {low}..{high}, {how}"),
+        )
+    }
+}
+
+/// A context term: the base's, widened where the event's central 95 % lies beyond it.
+fn fit_context(base: &CdfSpec, event: &[f64]) -> (CdfSpec, String) {
+    let (q025, q975) = (quantile(event, 0.025), quantile(event, 0.975));
+    let central = format!(
+        "the event's central 95 % is {}..{}",
+        round4(q025),
+        round4(q975)
+    );
+    let kept = |cdf: CdfSpec| (cdf, format!("kept: {central}, within it"));
+    let widened = |cdf: CdfSpec| (cdf, format!("widened: {central}"));
+    match *base {
+        CdfSpec::Sigmoid {
+            low,
+            high,
+            falling: true,
+        } if q975 > f64::from(low) => widened(CdfSpec::Sigmoid {
+            low: round4(q975),
+            high: round4(q975 + f64::from(high - low)),
+            falling: true,
+        }),
+        CdfSpec::Sigmoid {
+            low,
+            high,
+            falling: false,
+        } if q025 < f64::from(high) => widened(CdfSpec::Sigmoid {
+            low: round4(q025 - f64::from(high - low)),
+            high: round4(q025),
+            falling: false,
+        }),
+        CdfSpec::Bell { center, half_width } => {
+            // At a third of the half-width the bell still gives 0.78.
+            let reach = 3.0 * (q975 - f64::from(center)).max(f64::from(center) - q025);
+            if reach > f64::from(half_width) {
+                widened(CdfSpec::Bell {
+                    center,
+                    half_width: round4(reach),
+                })
+            } else {
+                kept(*base)
+            }
+        }
+        CdfSpec::FlatBell {
+            low,
+            plateau_low,
+            plateau_high,
+            high,
+        } if q025 < f64::from(plateau_low) || q975 > f64::from(plateau_high) => {
+            let pl = round4(q025.min(f64::from(plateau_low)));
+            let ph = round4(q975.max(f64::from(plateau_high)));
+            widened(CdfSpec::FlatBell {
+                low: pl - (plateau_low - low),
+                plateau_low: pl,
+                plateau_high: ph,
+                high: ph + (high - plateau_high),
+            })
+        }
+        CdfSpec::Binary { threshold, above }
+            if (above && q025 < f64::from(threshold))
+                || (!above && q975 > f64::from(threshold)) =>
+        {
+            widened(CdfSpec::Binary {
+                threshold: round4(if above { q025 } else { q975 }),
+                above,
+            })
+        }
+        _ => kept(*base),
+    }
+}
+
+/// `level` with `on` moved to `on`, `off` keeping its ratio.
+fn scaled(level: LevelSpec, on: f32) -> LevelSpec {
+    let ratio = if level.on > 0.0 { on / level.on } else { 1.0 };
+    LevelSpec {
+        on: round4(f64::from(on)),
+        off: round4(f64::from((level.off * ratio).min(on))),
+        ..level
+    }
+}
+
+/// `event` with its confirm level at `on` and `dwell_ms`, its alert moved with it.
+fn with_levels(event: &EventSpec, on: f32, dwell_ms: f32) -> EventSpec {
+    let mut e = event.clone();
+    let alert_ratio = if event.confirm.on > 0.0 {
+        event.alert.on / event.confirm.on
+    } else {
+        1.0
+    };
+    e.confirm = LevelSpec {
+        dwell_ms,
+        ..scaled(event.confirm, on)
+    };
+    e.alert = scaled(event.alert, (on * alert_ratio).min(on));
+    e.onset_level = e.onset_level.min(e.alert.on * 0.99);
+    e
+}
+
+fn build(config: &Config) -> Result<Detector, FitError> {
+    detector_build::build(config).map_err(|e| FitError::Config(e.to_string()))
+}
+
+/// Replays every recording with `config` and tallies the result.
+pub fn score(config: &Config, files: &[PathBuf], after_s: f64) -> Result<CorpusReport, FitError> {
+    let detector = build(config)?;
+    let results: Vec<RecordingResult> = files
+        .par_iter()
+        .map(|f| {
+            let reader = TraceReader::open(f).map_err(StreamError::from)?;
+            let name = reader.name().to_string();
+            let streamed = replay_stream(&detector, reader, |_| {})?;
+            Ok(RecordingResult::new(&name, &streamed, after_s))
+        })
+        .collect::<Result<_, FitError>>()?;
+    let events: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
+    Ok(CorpusReport::tally(&events, &results, after_s * 1e3))
+}
+
+/// A level candidate's figures for one event: events right less the other events' windows
+/// it confirmed in, its false confirmations, its median latency (ms), and its confirm
+/// level and dwell (ms).
+type Candidate = (i64, usize, f64, f32, f32);
+
+/// Chooses every labelled event's confirm level and dwell on `files`: the most events
+/// right, the false confirmations of each event within its share of the budget.
+pub fn fit_levels(
+    config: &Config,
+    files: &[PathBuf],
+    options: &FitOptions,
+    labelled: &[String],
+) -> Result<(Config, Vec<Note>), FitError> {
+    let names: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
+    let share = options.budget_per_hour / labelled.len().max(1) as f64;
+    let mut best: Vec<Option<Candidate>> = vec![None; names.len()];
+    let mut outside_hours = 0.0;
+    for &on in &CONFIRM_ON {
+        for &dwell in &DWELL_MS {
+            let mut candidate = config.clone();
+            for e in &mut candidate.events {
+                if labelled.contains(&e.name) {
+                    *e = with_levels(e, on, dwell);
+                }
+            }
+            let report = score(&candidate, files, options.after_s)?;
+            outside_hours = report.outside_hours;
+            for (k, name) in names.iter().enumerate() {
+                if !labelled.contains(name) {
+                    continue;
+                }
+                let tally = report.events.iter().find(|r| r.name == *name);
+                // Confirming this event in another's window costs what one right gains.
+                let right = tally.map_or(0, |r| r.correct) as i64
+                    - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
+                let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
+                let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
+                let within = outside_hours <= 0.0 || (false_count as f64 / outside_hours) <= share;
+                let better = match best[k] {
+                    None => true,
+                    Some((r, f, l, _, _)) => {
+                        let was_within =
+                            outside_hours <= 0.0 || (f as f64 / outside_hours) <= share;
+                        (within, right, std::cmp::Reverse(false_count))
+                            > (was_within, r, std::cmp::Reverse(f))
+                            || ((within, right, false_count) == (was_within, r, f) && latency < l)
+                    }
+                };
+                if better {
+                    best[k] = Some((right, false_count, latency, on, dwell));
+                }
+            }
+        }
+    }
+    let mut fitted = config.clone();
+    let mut notes = Vec::new();
+    for (event, b) in fitted.events.iter_mut().zip(&best) {
+        if let Some((right, false_count, latency, on, dwell)) = *b {
+            *event = with_levels(event, on, dwell);
+            notes.push(Note {
+                event: event.name.clone(),
+                item: "confirm",
+                text: format!(
+                    "on {on} for {dwell} ms: {right} events right less those of others it confirmed in, {false_count} false confirmations in {outside_hours:.3} h outside events (budget {share:.2} per hour for this event), median latency {latency:.2} ms; the alert and the `off` levels keep the base's ratios"
+                ),
+            });
+        }
+    }
+    Ok((fitted, notes))
+}
+
+/// Samples the features of every recording.
+pub fn sample_all(
+    detector: &Detector,
+    files: &[PathBuf],
+    options: &FitOptions,
+) -> Result<Vec<FeatureSamples>, FitError> {
+    files
+        .par_iter()
+        .map(|f| {
+            Ok(sample_recording(
+                detector,
+                f,
+                options.window_s,
+                options.after_s,
+            )?)
+        })
+        .collect()
+}
+
+/// Merges the samples of the recordings `keep` says to.
+pub fn merged(
+    detector: &Detector,
+    samples: &[FeatureSamples],
+    keep: impl Fn(usize) -> bool,
+) -> FeatureSamples {
+    let mut all = FeatureSamples::new(detector);
+    for (i, s) in samples.iter().enumerate() {
+        if keep(i) {
+            all.merge(s.clone());
+        }
+    }
+    all
+}
+
+/// The events labelled in `samples`.
+pub fn labelled_events(samples: &FeatureSamples) -> Vec<String> {
+    samples
+        .events
+        .iter()
+        .zip(&samples.inside)
+        .filter(|(_, inside)| inside.iter().any(|v| !v.is_empty()))
+        .map(|(e, _)| e.clone())
+        .collect()
+}
+
+/// Fits `base` on `files` (whose samples are `samples`, in order): the terms, then the
+/// levels.
+pub fn fit(
+    base: &Config,
+    detector: &Detector,
+    files: &[PathBuf],
+    samples: &[FeatureSamples],
+    options: &FitOptions,
+) -> Result<(Config, Vec<Note>), FitError> {
+    let all = merged(detector, samples, |_| true);
+    let labelled = labelled_events(&all);
+    let (terms, mut notes) = fit_terms(base, &all)?;
+    let (fitted, level_notes) = fit_levels(&terms, files, options, &labelled)?;
+    notes.extend(level_notes);
+    Ok((fitted, notes))
+}
+
+/// A TOML number for an `f32`, written as its shortest decimal (0.1, not 0.100000001).
+fn number(x: f32) -> toml_edit::Value {
+    toml_edit::Value::from(format!("{x}").parse::<f64>().unwrap_or(0.0))
+}
+
+fn cdf_table(cdf: &CdfSpec) -> toml_edit::InlineTable {
+    let mut params = toml_edit::InlineTable::new();
+    let shape = match *cdf {
+        CdfSpec::Sigmoid { low, high, falling } => {
+            params.insert("low", number(low));
+            params.insert("high", number(high));
+            if falling {
+                params.insert("falling", true.into());
+            }
+            "sigmoid"
+        }
+        CdfSpec::Bell { center, half_width } => {
+            params.insert("center", number(center));
+            params.insert("half_width", number(half_width));
+            "bell"
+        }
+        CdfSpec::FlatBell {
+            low,
+            plateau_low,
+            plateau_high,
+            high,
+        } => {
+            params.insert("low", number(low));
+            params.insert("plateau_low", number(plateau_low));
+            params.insert("plateau_high", number(plateau_high));
+            params.insert("high", number(high));
+            "flat_bell"
+        }
+        CdfSpec::Binary { threshold, above } => {
+            params.insert("threshold", number(threshold));
+            params.insert("above", above.into());
+            "binary"
+        }
+    };
+    let mut t = toml_edit::InlineTable::new();
+    t.insert(shape, params.into());
+    t
+}
+
+fn level_table(level: &LevelSpec) -> toml_edit::InlineTable {
+    let mut t = toml_edit::InlineTable::new();
+    t.insert("on", number(level.on));
+    t.insert("off", number(level.off));
+    t.insert("dwell_ms", number(level.dwell_ms));
+    t.insert("hold_ms", number(level.hold_ms));
+    t
+}
+
+/// One term per line.
+fn term_array(terms: impl Iterator<Item = toml_edit::InlineTable>) -> toml_edit::Array {
+    let mut a: toml_edit::Array = terms.collect();
+    for v in a.iter_mut() {
+        v.decor_mut().set_prefix("\n    ");
+    }
+    a.set_trailing(",\n");
+    a
+}
+
+/// `# ` before every line of `lines`, for a key's decor.
+fn comment(lines: &[String]) -> String {
+    lines.iter().map(|l| format!("# {l}\n")).collect()
+}
+
+/// The base's TOML with the fitted numbers in place: every fitted event's terms and
+/// levels rewritten, each with a comment saying what data set it; everything else (the
+/// channels, features, phases and their comments) as the user wrote it. The text is read
+/// back and must give exactly `fitted`.
+pub fn write_toml(
+    base_text: &str,
+    fitted: &Config,
+    notes: &[Note],
+    header: &[String],
+) -> Result<String, FitError> {
+    let mut doc: toml_edit::DocumentMut = base_text
+        .parse()
+        .map_err(|e: toml_edit::TomlError| FitError::Config(e.to_string()))?;
+    if let Some(events) = doc
+        .get_mut("event")
+        .and_then(toml_edit::Item::as_array_of_tables_mut)
+    {
+        for table in events.iter_mut() {
+            let name = table
+                .get("name")
+                .and_then(|n| n.as_str())
+                .unwrap_or_default()
+                .to_string();
+            let Some(spec) = fitted.events.iter().find(|e| e.name == name) else {
+                continue;
+            };
+            let of = |item: &str| -> Vec<String> {
+                notes
+                    .iter()
+                    .filter(|n| n.event == name && n.item == item)
+                    .map(|n| n.text.clone())
+                    .collect()
+            };
+            if !of("skipped").is_empty() {
+                continue;
+            }
+            if !spec.context.is_empty() {
+                let terms = spec.context.iter().map(|t| {
+                    let mut i = toml_edit::InlineTable::new();
+                    i.insert("feature", t.feature.as_str().into());
+                    i.insert("cdf", cdf_table(&t.cdf).into());
+                    i
+                });
+                table.insert("context", toml_edit::value(term_array(terms)));
+            }
+            let terms = spec.sensor.iter().map(|t| {
+                let mut i = toml_edit::InlineTable::new();
+                i.insert("feature", t.feature.as_str().into());
+                i.insert("weight", number(t.weight));
+                i.insert("cdf", cdf_table(&t.cdf).into());
+                i
+            });
+            table.insert("sensor", toml_edit::value(term_array(terms)));
+            table.insert("alert", toml_edit::value(level_table(&spec.alert)));
+            table.insert("confirm", toml_edit::value(level_table(&spec.confirm)));
+            for (key, item) in [
+                ("context", "context"),
+                ("sensor", "sensor"),
+                ("confirm", "confirm"),
+            ] {
+                let lines = of(item);
+                if let Some(mut k) = table.key_mut(key) {
+                    let prefix = if lines.is_empty() {
+                        String::new()
+                    } else {
+                        let mut all = vec![format!("fitted {item}:")];
+                        all.extend(lines.iter().map(|l| format!("  {l}")));
+                        comment(&all)
+                    };
+                    k.leaf_decor_mut().set_prefix(prefix);
+                }
+            }
+        }
+    }
+    let text = format!("{}{doc}", comment(header));
+    let back = Config::from_toml(&text).map_err(|e| FitError::Config(e.to_string()))?;
+    if back != *fitted {
+        return Err(FitError::Config(
+            "the fitted configuration does not read back as fitted (a number lost in writing)"
+                .into(),
+        ));
+    }
+    Ok(text)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn numbers_keep_four_significant_digits() {
+        assert_eq!(round4(1234.567), 1235.0);
+        assert_eq!(round4(0.000123456), 0.0001235);
+        assert_eq!(round4(-98.7654), -98.77);
+        assert_eq!(round4(0.0), 0.0);
+    }
+
+    /// A sensor term rises from the outside tail to the event's median, or falls when the
+    /// base's does; a context term passes the event's own values.
+    #[test]
+    fn terms_sit_between_the_distributions() {
+        let outside: Vec<f64> = (0..1000).map(|k| f64::from(k) / 100.0).collect();
+        let event: Vec<f64> = (0..100).map(|k| 50.0 + f64::from(k)).collect();
+        let (threshold, above, _) = best_threshold(&event, &outside);
+        let (cdf, _) = fit_sensor(false, &event, &outside, (threshold, above));
+        assert_eq!(
+            cdf,
+            CdfSpec::Sigmoid {
+                low: 9.98,
+                high: 74.0,
+                falling: false
+            }
+        );
+        // A veto the event stays within is kept; one it crosses moves out to take it in,
+        // its width kept.
+        let veto = CdfSpec::Sigmoid {
+            low: 200.0,
+            high: 300.0,
+            falling: true,
+        };
+        assert_eq!(fit_context(&veto, &event).0, veto);
+        let (cdf, text) = fit_context(
+            &CdfSpec::Sigmoid {
+                low: 100.0,
+                high: 120.0,
+                falling: true,
+            },
+            &event,
+        );
+        assert_eq!(
+            cdf,
+            CdfSpec::Sigmoid {
+                low: 147.0,
+                high: 167.0,
+                falling: true
+            },
+            "{text}"
+        );
+        let (cdf, _) = fit_context(
+            &CdfSpec::Bell {
+                center: 100.0,
+                half_width: 10.0,
+            },
+            &event,
+        );
+        assert_eq!(
+            cdf,
+            CdfSpec::Bell {
+                center: 100.0,
+                half_width: 144.0
+            }
+        );
+    }
+}
