@@ -72,6 +72,11 @@ pub enum FitError {
     /// A configuration could not be built.
     #[error("{0}")]
     Config(String),
+    /// No recording labels an event of the configuration.
+    #[error(
+        "none of the {0} recordings labels an event of the configuration in its `truth` column: there is nothing to fit"
+    )]
+    NothingLabelled(usize),
     /// A sensor term's feature does not separate its event from the time outside events.
     #[error(
         "feature `{feature}` does not separate event `{event}` from the time outside events: the best single threshold ({threshold}) tells them apart in {:.1} % (balanced accuracy; {:.0} % at least is needed). In the event's first window its median is {event_median}, outside {outside_median}. Choose another feature for this term, or label more events",
@@ -423,6 +428,9 @@ pub fn score(config: &Config, files: &[PathBuf], after_s: f64) -> Result<CorpusR
             let streamed = replay_stream(&detector, reader, |_| {})?;
             Ok(RecordingResult::new(&name, &streamed, after_s))
         })
+        // In file order, so that the error reported is the first file's.
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Result<_, FitError>>()?;
     let events: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
     Ok(CorpusReport::tally(&events, &results, after_s * 1e3))
@@ -515,6 +523,9 @@ pub fn sample_all(
                 options.after_s,
             )?)
         })
+        // In file order, so that the error reported is the first file's.
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect()
 }
 
@@ -555,6 +566,9 @@ pub fn fit(
 ) -> Result<(Config, Vec<Note>), FitError> {
     let all = merged(detector, samples, |_| true);
     let labelled = labelled_events(&all);
+    if labelled.is_empty() {
+        return Err(FitError::NothingLabelled(files.len()));
+    }
     let (terms, mut notes) = fit_terms(base, &all)?;
     let (fitted, level_notes) = fit_levels(&terms, files, options, &labelled)?;
     notes.extend(level_notes);

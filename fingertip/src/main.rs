@@ -1091,6 +1091,8 @@ fn run_jobs(
             bar.inc(1);
             result
         })
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect();
     bar.finish_and_clear();
     Ok((results?, started.elapsed().as_secs_f64()))
@@ -1397,6 +1399,9 @@ fn evaluate_traces(
                 after_ms / 1e3,
             ))
         })
+        // In order, so that the error reported is the first one's.
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
     let wall = started.elapsed().as_secs_f64();
@@ -1490,6 +1495,9 @@ fn features(
             bar.inc(1);
             Ok(s)
         })
+        // In order, so that the error reported is the first one's.
+        .collect::<Vec<_>>()
+        .into_iter()
         .collect::<Result<_>>()?;
     bar.finish_and_clear();
     let mut samples = fingertip::features::FeatureSamples::new(&detector);

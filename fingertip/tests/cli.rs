@@ -873,3 +873,125 @@ fn fit_writes_a_configuration_that_runs() {
     );
     assert!(!refused.exists());
 }
+
+/// A one-channel detector whose base misplaces its sigmoid (10..20 N for bumps of 5 N).
+const BUMP_TOML: &str = r#"
+rate_hz = 1000.0
+[[channel]]
+name = "x"
+unit = "N"
+[[feature]]
+name = "level"
+stage = { low_pass = { input = "x", cutoff_hz = 100.0 } }
+[[event]]
+name = "bump"
+sensor = [{ feature = "level", weight = 1.0, cdf = { sigmoid = { low = 10.0, high = 20.0 } } }]
+alert = { on = 0.55, off = 0.35, hold_ms = 50.0 }
+confirm = { on = 0.75, off = 0.5, hold_ms = 50.0 }
+[[phase]]
+name = "main"
+events = ["bump"]
+"#;
+
+/// Two seconds at 1 kHz: noise of ±0.1 N, and three bumps of `height` for 100 ms,
+/// labelled, at seeds-dependent places.
+fn bumps(seed: u64, height: f64) -> String {
+    let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
+    let mut noise = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    };
+    let starts = [300 + seed as usize * 10, 900, 1500 - seed as usize * 10];
+    let mut text = String::from("t,x,truth\n");
+    for k in 0..2000 {
+        let on = starts.iter().any(|s| (*s..s + 100).contains(&k));
+        let x = 0.2 * noise() + if on { height } else { 0.0 };
+        let label = if on { "bump" } else { "" };
+        text.push_str(&format!("{},{x:.4},{label}\n", k as f64 / 1000.0));
+    }
+    text
+}
+
+/// A corpus separable by construction is fitted to every event found and nothing false,
+/// the same file twice over; one that no feature separates, an unlabelled one, one whose
+/// channels or rate do not match are refused, the file named.
+#[test]
+fn fit_finds_what_is_separable_and_refuses_what_is_not() {
+    let dir = scratch("fit-bumps");
+    let config = dir.join("bump.toml");
+    std::fs::write(&config, BUMP_TOML).expect("written");
+    let cfg = config.to_str().expect("utf-8");
+    let corpus = |name: &str, height: f64, edit: &dyn Fn(String) -> String| {
+        let d = dir.join(name);
+        std::fs::create_dir_all(&d).expect("dir");
+        for seed in 1..=6 {
+            std::fs::write(d.join(format!("r{seed}.csv")), edit(bumps(seed, height)))
+                .expect("written");
+        }
+        d.to_str().expect("utf-8").to_owned()
+    };
+    let good = corpus("good", 5.0, &|t| t);
+    let fit = |traces: &str, out: &str| {
+        fingertip(&[
+            "fit", "--traces", traces, "--config", cfg, "--out", out, "--folds", "3",
+        ])
+    };
+    let (a, b) = (dir.join("a.toml"), dir.join("b.toml"));
+    for p in [&a, &b] {
+        let out = fit(&good, p.to_str().expect("utf-8"));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+    }
+    assert_eq!(
+        std::fs::read(&a).expect("a"),
+        std::fs::read(&b).expect("b"),
+        "fitting is deterministic"
+    );
+    let json = dir.join("scores.json");
+    let out = fingertip(&[
+        "evaluate",
+        "--traces",
+        &good,
+        "--config",
+        a.to_str().expect("utf-8"),
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("json")).expect("parses");
+    assert_eq!(report["events"][0]["runs"].as_u64(), Some(18), "{report}");
+    assert_eq!(
+        report["events"][0]["correct"].as_u64(),
+        Some(18),
+        "{report}"
+    );
+    assert_eq!(report["false_alarms"].as_u64(), Some(0), "{report}");
+
+    let flat = corpus("flat", 0.0, &|t| t);
+    let unlabelled = corpus("unlabelled", 5.0, &|t| t.replace(",bump", ","));
+    let renamed = corpus("renamed", 5.0, &|t| t.replacen("t,x,", "t,y,", 1));
+    let fast = corpus("fast", 5.0, &|t| {
+        t.lines()
+            .enumerate()
+            .map(|(k, l)| match (k, l.split_once(',')) {
+                (0, _) | (_, None) => format!("{l}\n"),
+                (_, Some((_, rest))) => format!("{},{rest}\n", (k - 1) as f64 / 2000.0),
+            })
+            .collect()
+    });
+    for (traces, expect) in [
+        (&flat, "`level` does not separate event `bump`"),
+        (&unlabelled, "nothing to fit"),
+        (&renamed, "r1.csv: the configuration reads channel 'x'"),
+        (&fast, "r1.csv: line 3, column `t`: time step 5e-4 s"),
+    ] {
+        let out_path = dir.join("refused.toml");
+        let out = fit(traces, out_path.to_str().expect("utf-8"));
+        let stderr = text(&out.stderr);
+        assert!(!out.status.success(), "{traces} accepted");
+        assert!(stderr.contains(expect), "{traces}: {stderr}");
+        assert!(!out_path.exists());
+    }
+}
