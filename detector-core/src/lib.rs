@@ -21,7 +21,9 @@ pub use detector::{Detector, TermConfidences};
 pub use feature::{Stage, StageError, StageSpec, Window};
 pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
-pub use state::{Decision, EventId, Inputs, Level, LevelParams, Output, PhaseId, State};
+pub use state::{
+    Decision, EventId, Inputs, Level, LevelParams, LevelState, Output, PhaseId, State,
+};
 pub use tick::DetectorTick;
 
 /// A name of a channel, feature, event or phase: 1 to [`NAME_LEN`] bytes.

@@ -224,8 +224,11 @@ impl core::fmt::Display for Rust<'_, LevelParams> {
     }
 }
 
+/// One decision level's state: the tick a detector runs for each event's alert and confirm
+/// levels, public so that a PC tool can try other levels on the same confidences (the
+/// default is down).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub(crate) struct LevelState {
+pub struct LevelState {
     pub(crate) up: bool,
     /// Ticks in a row at or above `on` while down, below `off` while up.
     run: u16,
@@ -236,7 +239,7 @@ impl LevelState {
     /// row, down below `off` after `hold` ticks in a row. Returns whether the level was
     /// raised at this tick.
     #[inline(always)]
-    pub(crate) fn step(&mut self, p: &LevelParams, q: u16) -> bool {
+    pub fn step(&mut self, p: &LevelParams, q: u16) -> bool {
         if self.up {
             self.run = if q < p.off {
                 self.run.saturating_add(1)

@@ -11,7 +11,7 @@ use std::path::Path;
 
 use detector_core::Detector;
 
-use crate::replay::{StreamError, replay_stream};
+use crate::replay::{StreamError, Streamed, replay_stream};
 use crate::trace::TraceReader;
 
 /// The most values kept per feature outside events: beyond twice as many, every other one
@@ -27,6 +27,9 @@ pub struct FeatureSamples {
     pub events: Vec<String>,
     /// `inside[event][feature]`: every value in the first `window` after each onset.
     pub inside: Vec<Vec<Vec<f64>>>,
+    /// `peaks[event][feature]`: the least and the greatest value in the first `window` of
+    /// each labelled occurrence of the event, one pair per occurrence.
+    pub peaks: Vec<Vec<Vec<(f64, f64)>>>,
     /// `outside[feature]`: values outside every event, one tick in `outside_stride`.
     pub outside: Vec<Vec<f64>>,
     /// How many outside ticks each kept value stands for (a power of two).
@@ -42,6 +45,7 @@ impl FeatureSamples {
         let events: Vec<String> = detector.events().iter().map(|n| n.to_string()).collect();
         FeatureSamples {
             inside: vec![vec![Vec::new(); features.len()]; events.len()],
+            peaks: vec![vec![Vec::new(); features.len()]; events.len()],
             outside: vec![Vec::new(); features.len()],
             outside_stride: 1,
             outside_seen: 0,
@@ -55,40 +59,54 @@ impl FeatureSamples {
             for (column, v) in self.outside.iter_mut().zip(values) {
                 column.push(*v);
             }
-            if self
-                .outside
-                .first()
-                .is_some_and(|c| c.len() >= 2 * OUTSIDE_CAP)
-            {
-                for column in &mut self.outside {
-                    *column = column.iter().copied().step_by(2).collect();
-                }
-                self.outside_stride *= 2;
-            }
+            self.keep_within_cap();
         }
         self.outside_seen += 1;
     }
 
+    /// Keeps every other outside value, stride doubled, while there are twice the cap.
+    fn keep_within_cap(&mut self) {
+        while self
+            .outside
+            .first()
+            .is_some_and(|c| c.len() >= 2 * OUTSIDE_CAP)
+        {
+            self.thin_outside(2);
+        }
+    }
+
+    /// Keeps one outside value in `step`.
+    fn thin_outside(&mut self, step: usize) {
+        if step > 1 {
+            for column in &mut self.outside {
+                *column = column.iter().copied().step_by(step).collect();
+            }
+            self.outside_stride *= step;
+        }
+    }
+
     /// Adds another recording's samples; the outside ones are thinned to the coarser of
-    /// the two strides.
+    /// the two strides, and further while over the cap. Appends in place: merging many
+    /// recordings one by one costs what their values do.
     pub fn merge(&mut self, other: FeatureSamples) {
         for (mine, theirs) in self.inside.iter_mut().zip(other.inside) {
             for (m, t) in mine.iter_mut().zip(theirs) {
                 m.extend(t);
             }
         }
-        let stride = self.outside_stride.max(other.outside_stride);
-        let (own_step, their_step) = (stride / self.outside_stride, stride / other.outside_stride);
-        for (mine, theirs) in self.outside.iter_mut().zip(other.outside) {
-            *mine = mine
-                .iter()
-                .copied()
-                .step_by(own_step)
-                .chain(theirs.into_iter().step_by(their_step))
-                .collect();
+        for (mine, theirs) in self.peaks.iter_mut().zip(other.peaks) {
+            for (m, t) in mine.iter_mut().zip(theirs) {
+                m.extend(t);
+            }
         }
-        self.outside_stride = stride;
+        let stride = self.outside_stride.max(other.outside_stride);
+        self.thin_outside(stride / self.outside_stride);
+        let their_step = stride / other.outside_stride;
+        for (mine, theirs) in self.outside.iter_mut().zip(other.outside) {
+            mine.extend(theirs.into_iter().step_by(their_step));
+        }
         self.outside_seen += other.outside_seen;
+        self.keep_within_cap();
     }
 
     /// Outside ticks seen, kept or not.
@@ -99,17 +117,20 @@ impl FeatureSamples {
 
 /// Replays one recording and sorts its ticks' feature values: a labelled row within
 /// `window_s` of its event's onset goes to that event, an unlabelled row more than
-/// `after_s` past the last event's end goes outside.
+/// `after_s` past the last event's end goes outside. Returns the replay's outcome too (the
+/// detector's decisions on the recording).
 pub fn sample_recording(
     detector: &Detector,
     file: &Path,
     window_s: f64,
     after_s: f64,
-) -> Result<FeatureSamples, StreamError> {
+) -> Result<(FeatureSamples, Streamed), StreamError> {
     let mut samples = FeatureSamples::new(detector);
     let mut values = vec![0.0; samples.features.len()];
     let reader = TraceReader::open(file)?;
-    replay_stream(detector, reader, |tick| {
+    // The labelled occurrence whose peaks are being taken, by its index among the labelled.
+    let mut occurrence = None;
+    let streamed = replay_stream(detector, reader, |tick| {
         for (k, v) in values.iter_mut().enumerate() {
             *v = tick.state.feature(k).map_or(0.0, |x| x.to_f64());
         }
@@ -122,13 +143,24 @@ pub fn sample_recording(
                     for (column, v) in samples.inside[e].iter_mut().zip(&values) {
                         column.push(*v);
                     }
+                    let fresh =
+                        occurrence.replace(tick.labelled.len()) != Some(tick.labelled.len());
+                    for (column, &v) in samples.peaks[e].iter_mut().zip(&values) {
+                        match column.last_mut() {
+                            Some((low, high)) if !fresh => {
+                                *low = low.min(v);
+                                *high = high.max(v);
+                            }
+                            _ => column.push((v, v)),
+                        }
+                    }
                 }
             }
             Some(event) if tick.t <= event.end_s + after_s => {}
             _ => samples.push_outside(&values),
         }
     })?;
-    Ok(samples)
+    Ok((samples, streamed))
 }
 
 /// How well one feature alone tells one event from the time outside events: the single
@@ -284,5 +316,27 @@ mod tests {
         assert_eq!(a.outside_stride, 2);
         assert_eq!(a.outside[0].len(), OUTSIDE_CAP + 5 + 2);
         assert_eq!(a.outside[0][OUTSIDE_CAP + 5..], [1.0, 3.0]);
+    }
+
+    /// Many short recordings merged one by one stay within the cap, every value standing
+    /// for the same number of ticks.
+    #[test]
+    fn merging_many_recordings_stays_within_the_cap() {
+        let short = |start: usize| FeatureSamples {
+            features: vec!["f".into()],
+            outside: vec![(start..start + 1000).map(|k| k as f64).collect()],
+            outside_stride: 1,
+            outside_seen: 1000,
+            ..FeatureSamples::default()
+        };
+        let mut all = short(0);
+        let recordings = 5 * OUTSIDE_CAP / 1000;
+        for r in 1..recordings {
+            all.merge(short(r * 1000));
+        }
+        assert_eq!(all.outside_ticks(), recordings * 1000);
+        assert!(all.outside[0].len() < 2 * OUTSIDE_CAP);
+        assert_eq!(all.outside_stride, 4);
+        assert!(all.outside[0].windows(2).all(|w| w[1] - w[0] == 4.0));
     }
 }

@@ -8,8 +8,8 @@
 //!
 //! - **Sensor terms** (evidence for the event): a rising sigmoid from where the time
 //!   outside events ends (its 99.9 % quantile, over the ticks the event's base context
-//!   lets through) to where the event's first quarter is (its 25 % quantile in the
-//!   window); falling, mirrored, when the base's is. A term whose feature does not
+//!   lets through) to what nine in ten of the event's occurrences reach in the window (the
+//!   10 % quantile of their peaks); falling, mirrored, when the base's is. A term whose feature does not
 //!   separate the event (balanced accuracy of the best single threshold below
 //!   [`MIN_SEPARATION`]) stops the fit with the figures.
 //! - **Weights**: in proportion to each sensor term's separation above chance from the
@@ -28,13 +28,13 @@
 use std::path::PathBuf;
 
 use detector_build::{Config, EventSpec, LevelSpec};
-use detector_core::CdfSpec;
 use detector_core::Detector;
+use detector_core::{CdfSpec, LevelParams, LevelState};
 use rayon::prelude::*;
 
 use crate::corpus::{CorpusReport, RecordingResult};
 use crate::features::{FeatureSamples, best_threshold, sample_recording};
-use crate::replay::{StreamError, replay_stream};
+use crate::replay::{DecisionRecord, StreamError, replay_stream};
 use crate::trace::TraceReader;
 
 /// The least balanced accuracy of a sensor term's feature against its event for the fit
@@ -45,9 +45,10 @@ pub const MIN_SEPARATION: f64 = 0.6;
 /// be fitted against those alone.
 const MIN_LET_THROUGH: usize = 1000;
 
-/// The confirm levels tried.
-const CONFIRM_ON: [f32; 13] = [
-    0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9,
+/// The confirm levels tried: low ones too, for events whose weakest occurrences reach only
+/// the foot of their terms' sigmoids.
+const CONFIRM_ON: [f32; 17] = [
+    0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9,
 ];
 /// The confirm dwells tried (ms).
 const DWELL_MS: [f32; 5] = [0.0, 0.4, 1.0, 2.0, 5.0];
@@ -118,6 +119,15 @@ fn round4(v: f64) -> f32 {
     let digits = 3 - v.abs().log10().floor() as i32;
     let scale = 10f64.powi(digits);
     ((v * scale).round() / scale) as f32
+}
+
+/// A sigmoid's bounds as written: within the range a feature can take (it saturates at
+/// ±32768), rounded, `low` below `high`.
+fn sigmoid_bounds(low: f64, high: f64) -> (f32, f32) {
+    const TOP: f32 = 32767.0;
+    let high = round4(high).clamp(-TOP, TOP);
+    let below = round4(f64::from(high) - gap(f64::from(high), 0.0)).max(-TOP - 1.0);
+    (round4(low).clamp(-TOP - 1.0, TOP).min(below), high)
 }
 
 /// The value at quantile `p` of sorted values (nearest rank).
@@ -221,7 +231,14 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                 });
             }
             let falling = matches!(term.cdf, CdfSpec::Sigmoid { falling: true, .. });
-            let (cdf, text) = fit_sensor(falling, &values, &others, (threshold, above));
+            // What each occurrence reaches: its greatest value (its least, falling).
+            let reached = sorted(
+                &samples.peaks[e][f]
+                    .iter()
+                    .map(|&(low, high)| if falling { low } else { high })
+                    .collect::<Vec<f64>>(),
+            );
+            let (cdf, text) = fit_sensor(falling, &values, &reached, &others, (threshold, above));
             term.cdf = cdf;
             // How well it tells the event from each other labelled event, on its side.
             let mut weakest = (accuracy, "the time outside events".to_string());
@@ -269,43 +286,47 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
     Ok((config, notes))
 }
 
-/// A sensor term: from the end of the outside distribution to the event's median.
+/// A sensor term: from the end of the outside distribution to what nine in ten of the
+/// event's occurrences reach (`reached`: each occurrence's greatest value in its window, its
+/// least when falling, sorted), so that the term is sure of most events at their peak.
 fn fit_sensor(
     falling: bool,
     event: &[f64],
+    reached: &[f64],
     outside: &[f64],
     (threshold, above): (f64, bool),
 ) -> (CdfSpec, String) {
     if !falling {
         let mut low = quantile(outside, 0.999);
-        let mut high = quantile(event, 0.25);
-        let mut how = "from the 99.9 % quantile outside events to the event's 25 % quantile";
+        let mut high = quantile(reached, 0.1);
+        let mut how = "from the 99.9 % quantile outside events to what 90 % of the events reach";
         if high <= low + gap(low, high) {
-            // The event's first quarter is inside the outside tail: start where one
-            // threshold separates best and end where most of the event is.
+            // Most events peak inside the outside tail: start where one threshold
+            // separates best and end where most of the event is.
             low = if above { threshold } else { low };
             high = quantile(event, 0.9).max(low + gap(low, high));
-            how = "from the best single threshold to the event's 90 % quantile (its 25 % quantile lies within the outside tail)";
+            how = "from the best single threshold to the event's 90 % quantile (most events peak within the outside tail)";
         }
-        let (low, high) = (round4(low), round4(high));
+        let (low, high) = sigmoid_bounds(low, high);
         (
             CdfSpec::Sigmoid {
                 low,
-                high: high.max(round4(f64::from(low) + gap(f64::from(low), 0.0))),
+                high,
                 falling: false,
             },
             format!("rising {low}..{high}, {how}"),
         )
     } else {
         let mut high = quantile(outside, 0.001);
-        let mut low = quantile(event, 0.75);
-        let mut how = "falling from the event's 75 % quantile to the 0.1 % quantile outside events";
+        let mut low = quantile(reached, 0.9);
+        let mut how =
+            "falling from what 90 % of the events reach to the 0.1 % quantile outside events";
         if low >= high - gap(low, high) {
             high = if above { high } else { threshold };
             low = quantile(event, 0.1).min(high - gap(low, high));
-            how = "falling from the event's 10 % quantile to the best single threshold (its 75 % quantile lies within the outside tail)";
+            how = "falling from the event's 10 % quantile to the best single threshold (most events peak within the outside tail)";
         }
-        let (low, high) = (round4(low), round4(high));
+        let (low, high) = sigmoid_bounds(low, high);
         (
             CdfSpec::Sigmoid {
                 low,
@@ -417,83 +438,210 @@ fn build(config: &Config) -> Result<Detector, FitError> {
     detector_build::build(config).map_err(|e| FitError::Config(e.to_string()))
 }
 
-/// Replays every recording with `config` and tallies the result.
-pub fn score(config: &Config, files: &[PathBuf], after_s: f64) -> Result<CorpusReport, FitError> {
-    let detector = build(config)?;
-    let results: Vec<RecordingResult> = files
-        .par_iter()
-        .map(|f| {
-            let reader = TraceReader::open(f).map_err(StreamError::from)?;
-            let name = reader.name().to_string();
-            let streamed = replay_stream(&detector, reader, |_| {})?;
-            Ok(RecordingResult::new(&name, &streamed, after_s))
-        })
-        // In file order, so that the error reported is the first file's.
-        .collect::<Vec<_>>()
-        .into_iter()
-        .collect::<Result<_, FitError>>()?;
-    let events: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
-    Ok(CorpusReport::tally(&events, &results, after_s * 1e3))
+/// Every candidate's confirmations on one recording, with the recording's labels: the
+/// confidences are those of the terms fitted, the candidates' confirm levels each run on
+/// them with the detector's own level state.
+struct Tried {
+    name: String,
+    span: (f64, f64),
+    labelled: Vec<crate::replay::Labelled>,
+    /// `[candidate]`: the confirmations that candidate raises.
+    confirmations: Vec<Vec<DecisionRecord>>,
+}
+
+/// Replays `file` once with `detector` (the terms fitted), stepping every candidate's
+/// confirm level (`levels[candidate][event]`) on each event's confidence as the detector
+/// steps its own: only while the event is evaluated in the phase, reset when it cannot be
+/// judged or the phase changes.
+fn try_levels(
+    detector: &Detector,
+    file: &PathBuf,
+    levels: &[Vec<LevelParams>],
+) -> Result<Tried, FitError> {
+    let events = detector.events().len();
+    let mut states = vec![vec![LevelState::default(); events]; levels.len()];
+    let mut confirmations = vec![Vec::new(); levels.len()];
+    let mut phase = None;
+    let reader = TraceReader::open(file).map_err(StreamError::from)?;
+    let name = reader.name().to_string();
+    let streamed = replay_stream(detector, reader, |tick| {
+        let now = tick.state.phase();
+        if phase.replace(now).is_some_and(|p| p != now) {
+            states
+                .iter_mut()
+                .flatten()
+                .for_each(|s| *s = LevelState::default());
+        }
+        let out = tick.output;
+        for e in 0..events {
+            let bit = 1u8 << e;
+            if out.evaluated & bit == 0 {
+                continue;
+            }
+            let judged = out.unjudgeable & bit == 0;
+            let q = out.confidences[e].to_bits();
+            for (c, candidate) in levels.iter().enumerate() {
+                let state = &mut states[c][e];
+                if !judged {
+                    *state = LevelState::default();
+                } else if state.step(&candidate[e], q) {
+                    confirmations[c].push(DecisionRecord {
+                        event: detector.events()[e].to_string(),
+                        level: detector_core::Level::Confirm.name(),
+                        confidence: out.confidences[e].to_f64(),
+                        onset_s: tick.t,
+                        t_s: tick.t,
+                    });
+                }
+            }
+        }
+    })?;
+    Ok(Tried {
+        name,
+        span: streamed.span_s,
+        labelled: streamed.labelled,
+        confirmations,
+    })
 }
 
 /// A level candidate's figures for one event: events right less the other events' windows
-/// it confirmed in, its false confirmations, its median latency (ms), and its confirm
-/// level and dwell (ms).
-type Candidate = (i64, usize, f64, f32, f32);
+/// it confirmed in, its false confirmations, its median latency (ms), and its index in the
+/// grid of confirm levels and dwells.
+type Candidate = (i64, usize, f64, usize);
 
-/// Chooses every labelled event's confirm level and dwell on `files`: the most events
-/// right, the false confirmations of each event within its share of the budget.
+/// What a fit gives: the configuration, a note per fitted number, and the fitted
+/// configuration's figures on the recordings it was fitted on and on those held out.
+#[derive(Debug)]
+pub struct Fitted {
+    /// The fitted configuration.
+    pub config: Config,
+    /// What data set each fitted number.
+    pub notes: Vec<Note>,
+    /// Its figures on the recordings it was fitted on.
+    pub trained: CorpusReport,
+    /// Its figures on the recordings held out (none held out: empty).
+    pub held: CorpusReport,
+}
+
+/// The confirmations of one candidate per event (`choice[event]`), in time order.
+fn chosen(tried: &Tried, choice: &[usize], events: &[String]) -> Vec<DecisionRecord> {
+    let mut all: Vec<DecisionRecord> = events
+        .iter()
+        .zip(choice)
+        .flat_map(|(name, &c)| {
+            tried.confirmations[c]
+                .iter()
+                .filter(move |d| d.event == *name)
+        })
+        .cloned()
+        .collect();
+    all.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+    all
+}
+
+/// Tallies `tried` with each event's confirmations from `choice`.
+fn tally(tried: &[Tried], choice: &[usize], events: &[String], after_s: f64) -> CorpusReport {
+    let results: Vec<RecordingResult> = tried
+        .iter()
+        .map(|t| RecordingResult {
+            name: t.name.clone(),
+            seconds: t.span.1 - t.span.0,
+            score: crate::score::score_recording(
+                &t.labelled,
+                &chosen(t, choice, events),
+                after_s,
+                t.span,
+            ),
+        })
+        .collect();
+    CorpusReport::tally(events, &results, after_s * 1e3)
+}
+
+/// Chooses every labelled event's confirm level and dwell on `train`: the most events
+/// right less the other events' windows it confirms in, its false confirmations within its
+/// share of the budget. One replay per recording, of `train` and `held` alike: the
+/// candidates' levels all run on the same confidences, and the levels chosen on `train`
+/// are scored on both.
 pub fn fit_levels(
     config: &Config,
-    files: &[PathBuf],
+    train: &[PathBuf],
+    held: &[PathBuf],
     options: &FitOptions,
     labelled: &[String],
-) -> Result<(Config, Vec<Note>), FitError> {
+) -> Result<Fitted, FitError> {
     let names: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
     let share = options.budget_per_hour / labelled.len().max(1) as f64;
-    let mut best: Vec<Option<Candidate>> = vec![None; names.len()];
-    let mut outside_hours = 0.0;
-    for &on in &CONFIRM_ON {
-        for &dwell in &DWELL_MS {
-            let mut candidate = config.clone();
-            for e in &mut candidate.events {
+    let grid: Vec<(f32, f32)> = CONFIRM_ON
+        .iter()
+        .flat_map(|&on| DWELL_MS.iter().map(move |&dwell| (on, dwell)))
+        .collect();
+    // Each candidate's confirm levels, compiled exactly as the detector would have them.
+    let levels: Vec<Vec<LevelParams>> = grid
+        .iter()
+        .map(|&(on, dwell)| {
+            let mut c = config.clone();
+            for e in &mut c.events {
                 if labelled.contains(&e.name) {
                     *e = with_levels(e, on, dwell);
                 }
             }
-            let report = score(&candidate, files, options.after_s)?;
-            outside_hours = report.outside_hours;
-            for (k, name) in names.iter().enumerate() {
-                if !labelled.contains(name) {
-                    continue;
+            detector_build::compile(&c)
+                .map(|compiled| compiled.events.iter().map(|e| e.levels[1]).collect())
+                .map_err(|e| FitError::Config(e.to_string()))
+        })
+        .collect::<Result<_, _>>()?;
+    let detector = build(config)?;
+    let mut tried: Vec<Tried> = train
+        .iter()
+        .chain(held)
+        .collect::<Vec<_>>()
+        .par_iter()
+        .map(|f| try_levels(&detector, f, &levels))
+        // In file order, so that the error reported is the first file's.
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect::<Result<_, _>>()?;
+    let held_tried = tried.split_off(train.len());
+    let mut best: Vec<Option<Candidate>> = vec![None; names.len()];
+    let mut outside_hours = 0.0;
+    for c in 0..grid.len() {
+        let report = tally(&tried, &vec![c; names.len()], &names, options.after_s);
+        outside_hours = report.outside_hours;
+        let within = |false_count: usize| {
+            outside_hours <= 0.0 || (false_count as f64 / outside_hours) <= share
+        };
+        for (k, name) in names.iter().enumerate() {
+            if !labelled.contains(name) {
+                continue;
+            }
+            let tally = report.events.iter().find(|r| r.name == *name);
+            // Confirming this event in another's window costs what one right gains.
+            let right = tally.map_or(0, |r| r.correct) as i64
+                - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
+            let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
+            let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
+            let better = match best[k] {
+                None => true,
+                Some((r, f, l, _)) => {
+                    let (now, was) = (
+                        (within(false_count), right, std::cmp::Reverse(false_count)),
+                        (within(f), r, std::cmp::Reverse(f)),
+                    );
+                    now > was || (now == was && latency < l)
                 }
-                let tally = report.events.iter().find(|r| r.name == *name);
-                // Confirming this event in another's window costs what one right gains.
-                let right = tally.map_or(0, |r| r.correct) as i64
-                    - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
-                let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
-                let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
-                let within = outside_hours <= 0.0 || (false_count as f64 / outside_hours) <= share;
-                let better = match best[k] {
-                    None => true,
-                    Some((r, f, l, _, _)) => {
-                        let was_within =
-                            outside_hours <= 0.0 || (f as f64 / outside_hours) <= share;
-                        (within, right, std::cmp::Reverse(false_count))
-                            > (was_within, r, std::cmp::Reverse(f))
-                            || ((within, right, false_count) == (was_within, r, f) && latency < l)
-                    }
-                };
-                if better {
-                    best[k] = Some((right, false_count, latency, on, dwell));
-                }
+            };
+            if better {
+                best[k] = Some((right, false_count, latency, c));
             }
         }
     }
     let mut fitted = config.clone();
     let mut notes = Vec::new();
+    // Events not labelled run the same levels in every candidate.
+    let choice: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
     for (event, b) in fitted.events.iter_mut().zip(&best) {
-        if let Some((right, false_count, latency, on, dwell)) = *b {
+        if let Some((right, false_count, latency, c)) = *b {
+            let (on, dwell) = grid[c];
             *event = with_levels(event, on, dwell);
             notes.push(Note {
                 event: event.name.clone(),
@@ -504,29 +652,43 @@ pub fn fit_levels(
             });
         }
     }
-    Ok((fitted, notes))
+    Ok(Fitted {
+        trained: tally(&tried, &choice, &names, options.after_s),
+        held: tally(&held_tried, &choice, &names, options.after_s),
+        config: fitted,
+        notes,
+    })
 }
 
-/// Samples the features of every recording.
+/// Every recording's feature samples, with the base detector's figures on it: both from
+/// one replay.
+pub struct Sampled {
+    /// Feature values in and outside events, per recording.
+    pub samples: Vec<FeatureSamples>,
+    /// The base detector's score, per recording.
+    pub base: Vec<RecordingResult>,
+}
+
+/// Samples the features of every recording and scores the base detector on it.
 pub fn sample_all(
     detector: &Detector,
     files: &[PathBuf],
     options: &FitOptions,
-) -> Result<Vec<FeatureSamples>, FitError> {
-    files
+) -> Result<Sampled, FitError> {
+    let each: Vec<(FeatureSamples, RecordingResult)> = files
         .par_iter()
         .map(|f| {
-            Ok(sample_recording(
-                detector,
-                f,
-                options.window_s,
-                options.after_s,
-            )?)
+            let (samples, streamed) =
+                sample_recording(detector, f, options.window_s, options.after_s)?;
+            let result = RecordingResult::new(&f.display().to_string(), &streamed, options.after_s);
+            Ok((samples, result))
         })
         // In file order, so that the error reported is the first file's.
         .collect::<Vec<_>>()
         .into_iter()
-        .collect()
+        .collect::<Result<_, FitError>>()?;
+    let (samples, base) = each.into_iter().unzip();
+    Ok(Sampled { samples, base })
 }
 
 /// Merges the samples of the recordings `keep` says to.
@@ -555,24 +717,25 @@ pub fn labelled_events(samples: &FeatureSamples) -> Vec<String> {
         .collect()
 }
 
-/// Fits `base` on `files` (whose samples are `samples`, in order): the terms, then the
-/// levels.
+/// Fits `base` on `train` (whose samples are `samples`, in order): the terms, then the
+/// levels; the result is scored on `train` and on `held`.
 pub fn fit(
     base: &Config,
     detector: &Detector,
-    files: &[PathBuf],
+    train: &[PathBuf],
     samples: &[FeatureSamples],
+    held: &[PathBuf],
     options: &FitOptions,
-) -> Result<(Config, Vec<Note>), FitError> {
+) -> Result<Fitted, FitError> {
     let all = merged(detector, samples, |_| true);
     let labelled = labelled_events(&all);
     if labelled.is_empty() {
-        return Err(FitError::NothingLabelled(files.len()));
+        return Err(FitError::NothingLabelled(train.len()));
     }
-    let (terms, mut notes) = fit_terms(base, &all)?;
-    let (fitted, level_notes) = fit_levels(&terms, files, options, &labelled)?;
-    notes.extend(level_notes);
-    Ok((fitted, notes))
+    let (terms, notes) = fit_terms(base, &all)?;
+    let mut fitted = fit_levels(&terms, train, held, options, &labelled)?;
+    fitted.notes.splice(0..0, notes);
+    Ok(fitted)
 }
 
 /// A TOML number for an `f32`, written as its shortest decimal (0.1, not 0.100000001).
@@ -740,6 +903,27 @@ mod tests {
         assert_eq!(round4(0.0), 0.0);
     }
 
+    /// A feature saturated in the corpus (±32768) still gives bounds a sigmoid takes.
+    #[test]
+    fn bounds_stay_within_the_feature_range() {
+        for (low, high) in [(32767.99, 32767.99), (100.0, 40000.0), (-40000.0, -32768.0)] {
+            let (l, h) = sigmoid_bounds(low, high);
+            assert!(
+                l < h && h <= 32767.0 && l >= -32768.0,
+                "{low}..{high} gave {l}..{h}"
+            );
+            assert!(
+                detector_core::Cdf::new(&CdfSpec::Sigmoid {
+                    low: l,
+                    high: h,
+                    falling: false
+                })
+                .is_ok(),
+                "{l}..{h}"
+            );
+        }
+    }
+
     /// A sensor term rises from the outside tail to the event's median, or falls when the
     /// base's does; a context term passes the event's own values.
     #[test]
@@ -747,12 +931,14 @@ mod tests {
         let outside: Vec<f64> = (0..1000).map(|k| f64::from(k) / 100.0).collect();
         let event: Vec<f64> = (0..100).map(|k| 50.0 + f64::from(k)).collect();
         let (threshold, above, _) = best_threshold(&event, &outside);
-        let (cdf, _) = fit_sensor(false, &event, &outside, (threshold, above));
+        // Ten events reaching 60, 65, .. 105.
+        let reached: Vec<f64> = (0..10).map(|k| 60.0 + 5.0 * f64::from(k)).collect();
+        let (cdf, _) = fit_sensor(false, &event, &reached, &outside, (threshold, above));
         assert_eq!(
             cdf,
             CdfSpec::Sigmoid {
                 low: 9.98,
-                high: 74.0,
+                high: 60.0,
                 falling: false
             }
         );

@@ -1486,7 +1486,7 @@ fn features(
     let per_file: Vec<fingertip::features::FeatureSamples> = files
         .par_iter()
         .map(|f| {
-            let s = fingertip::features::sample_recording(
+            let (s, _) = fingertip::features::sample_recording(
                 &detector,
                 f,
                 window_ms / 1e3,
@@ -1635,44 +1635,56 @@ fn fit(
         .collect();
     let plan = plan_outputs(&inputs, &[Some((out, Kind::File))])?;
     println!("fitting {base_name} on {} recordings", files.len());
-    let samples = fit::sample_all(&detector, &files, &options)?;
+    let sampled = fit::sample_all(&detector, &files, &options)?;
+    let base_score = |keep: &dyn Fn(usize) -> bool| {
+        let results: Vec<_> = sampled
+            .base
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| keep(*i))
+            .map(|(_, r)| r.clone())
+            .collect();
+        let events: Vec<String> = base.events.iter().map(|e| e.name.clone()).collect();
+        fingertip::corpus::CorpusReport::tally(&events, &results, options.after_s * 1e3)
+    };
     let k = folds.min(files.len());
     if k >= 2 {
         println!("cross-validation, {k} folds by recording (recording i in fold i mod {k}):");
         for fold in 0..k {
-            let pick = |held: bool| -> (Vec<PathBuf>, Vec<fingertip::features::FeatureSamples>) {
+            let held = |i: usize| i % k == fold;
+            let pick = |side: bool| -> Vec<PathBuf> {
                 files
                     .iter()
-                    .zip(&samples)
                     .enumerate()
-                    .filter(|(i, _)| (i % k == fold) == held)
-                    .map(|(_, (f, s))| (f.clone(), s.clone()))
-                    .unzip()
+                    .filter(|(i, _)| held(*i) == side)
+                    .map(|(_, f)| f.clone())
+                    .collect()
             };
-            let (train, train_samples) = pick(false);
-            let (test, _) = pick(true);
-            let (fitted, _) = fit::fit(&base, &detector, &train, &train_samples, &options)
+            let (train, test) = (pick(false), pick(true));
+            let train_samples: Vec<_> = sampled
+                .samples
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| !held(*i))
+                .map(|(_, s)| s.clone())
+                .collect();
+            let fitted = fit::fit(&base, &detector, &train, &train_samples, &test, &options)
                 .with_context(|| format!("fold {}", fold + 1))?;
-            let trained = fit::score(&fitted, &train, options.after_s)?;
-            let held = fit::score(&fitted, &test, options.after_s)?;
-            let base_held = fit::score(&base, &test, options.after_s)?;
             println!(
                 "  fold {}: {} training, {} held out",
                 fold + 1,
                 train.len(),
                 test.len()
             );
-            println!("    fitted, training:  {}", fit_figures(&trained));
-            println!("    fitted, held out:  {}", fit_figures(&held));
-            println!("    base,   held out:  {}", fit_figures(&base_held));
+            println!("    fitted, training:  {}", fit_figures(&fitted.trained));
+            println!("    fitted, held out:  {}", fit_figures(&fitted.held));
+            println!("    base,   held out:  {}", fit_figures(&base_score(&held)));
         }
     }
-    let (fitted, notes) = fit::fit(&base, &detector, &files, &samples, &options)?;
-    let all = fit::score(&fitted, &files, options.after_s)?;
-    let base_all = fit::score(&base, &files, options.after_s)?;
+    let fitted = fit::fit(&base, &detector, &files, &sampled.samples, &[], &options)?;
     println!("on every recording (training figures):");
-    println!("    fitted: {}", fit_figures(&all));
-    println!("    base:   {}", fit_figures(&base_all));
+    println!("    fitted: {}", fit_figures(&fitted.trained));
+    println!("    base:   {}", fit_figures(&base_score(&|_| true)));
     let header = vec![
         format!(
             "Fitted by `fingertip fit` from {base_name} on {} labelled recordings: each",
@@ -1689,7 +1701,7 @@ fn fit(
         ),
         String::new(),
     ];
-    let text = fit::write_toml(&base_text, &fitted, &notes, &header)?;
+    let text = fit::write_toml(&base_text, &fitted.config, &fitted.notes, &header)?;
     plan.write(0, text.as_bytes())?;
     plan.commit()?;
     println!("written: {}", out.display());

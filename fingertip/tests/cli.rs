@@ -843,6 +843,21 @@ fn fit_writes_a_configuration_that_runs() {
         .filter_map(|e| e["correct"].as_u64())
         .sum();
     assert!(right >= 7, "{report}");
+    // The fit's own figures (its levels stepped on the fitted terms' confidences) are the
+    // detector's: the same events right as its replay.
+    let trained = stdout
+        .lines()
+        .find_map(|l| l.trim_start().strip_prefix("fitted: "))
+        .expect("training figures");
+    for event in report["events"].as_array().expect("events") {
+        let figure = format!(
+            "{} {}/{}",
+            event["name"].as_str().expect("name"),
+            event["correct"],
+            event["runs"]
+        );
+        assert!(trained.contains(&figure), "{figure} in {trained}");
+    }
 
     // A contact judged by the commanded acceleration alone: it cannot tell contacts apart.
     let bad = dir.join("bad.toml");
