@@ -3,7 +3,7 @@
 //! ([`Compiled::to_rust`]) both read. Every rule is checked here with an error that names
 //! the item; the core's image loader checks the invariants the tick relies on once more.
 
-use detector_core::feature::{MAX_SLOTS, STE_POOL, Stage};
+use detector_core::feature::{MAX_SLOTS, Stage, WINDOW_POOL};
 use detector_core::{
     Cdf, CdfSpec, ChannelMask, Confidence, EventMask, LevelParams, MAX_CHANNELS,
     MAX_DISTINCT_TERMS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS, NAME_LEN, Name,
@@ -65,7 +65,7 @@ pub struct Compiled {
     /// The channels each slot depends on.
     pub slot_channels: [ChannelMask; MAX_SLOTS],
     /// Tapered STE windows' taps (Q24), at each window's offset.
-    pub taps: [u32; STE_POOL],
+    pub taps: [u32; WINDOW_POOL],
     /// The distinct (feature, CDF) pairs of all events' terms.
     pub psis: Vec<Psi>,
     /// Events, by index.
@@ -226,7 +226,7 @@ pub fn compile(config: &Config) -> Result<Compiled, ConfigError> {
         channels: Vec::new(),
         features: Vec::new(),
         slot_channels: [0; MAX_SLOTS],
-        taps: [0; STE_POOL],
+        taps: [0; WINDOW_POOL],
         psis: Vec::new(),
         events: Vec::new(),
         phases: Vec::new(),

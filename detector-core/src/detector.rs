@@ -10,7 +10,7 @@ use heapless::Vec;
 
 use crate::Name;
 use crate::cdf::Cdf;
-use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState, taps_valid};
+use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL, taps_valid};
 use crate::image::{ImageError, Reader, Section};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::state::{
@@ -117,7 +117,7 @@ pub struct Detector {
     stages: Vec<Stage, MAX_FEATURES>,
     /// Channel dependencies of each slot.
     slot_channels: [ChannelMask; MAX_SLOTS],
-    weights: [u32; STE_POOL],
+    weights: [u32; WINDOW_POOL],
     /// The distinct (feature, CDF) pairs of all events' terms.
     psis: Vec<Psi, MAX_PSI>,
     events: Vec<Event, MAX_EVENTS>,
@@ -138,7 +138,7 @@ impl Detector {
             phase_names: Vec::new(),
             stages: Vec::new(),
             slot_channels: [0; MAX_SLOTS],
-            weights: [0; STE_POOL],
+            weights: [0; WINDOW_POOL],
             psis: Vec::new(),
             events: Vec::new(),
             phases: Vec::new(),
@@ -167,7 +167,7 @@ impl Detector {
         self.phase_names.clear();
         self.stages.clear();
         self.slot_channels = [0; MAX_SLOTS];
-        self.weights = [0; STE_POOL];
+        self.weights = [0; WINDOW_POOL];
         self.psis.clear();
         self.events.clear();
         self.phases.clear();
@@ -316,7 +316,7 @@ impl Detector {
         State {
             values: [0; MAX_SLOTS],
             stages: [StageState::default(); MAX_FEATURES],
-            ring: [0; STE_POOL],
+            ring: [0; WINDOW_POOL],
             psi: [0; MAX_PSI],
             events: [EventState::default(); MAX_EVENTS],
             phase: 0,

@@ -6,7 +6,7 @@
 //! (a low-pass of a derivative, the STE of a difference, ...). All arithmetic is integer,
 //! saturating at the [`Signal`](crate::Signal) range, with no division.
 
-use crate::MAX_STE_WINDOW;
+use crate::MAX_WINDOW;
 use crate::image::{ImageError, Reader, Sink};
 
 /// A window shape for the short-time energy.
@@ -42,9 +42,11 @@ pub enum StageSpec<N> {
         input: N,
     },
     /// First-order low-pass, backward-Euler discretization:
-    /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c). The output starts at the
-    /// first sample, so a channel's offset does not look like a step. The state keeps 32
-    /// fraction bits.
+    /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c). It warms up as the mean of
+    /// what it has seen: the n-th sample weighs max(α, 1/n), so the output starts at the
+    /// first sample (a channel's offset does not look like a step) and is the plain mean of
+    /// the samples so far until that mean would forget more slowly than the filter (at most
+    /// the first 65,535 samples). The state keeps 32 fraction bits.
     LowPass {
         /// Source channel or feature.
         input: N,
@@ -84,12 +86,17 @@ pub enum StageSpec<N> {
         /// Source channel or feature.
         input: N,
     },
-    /// a − b.
+    /// a − gain · b: a difference of two quantities in the same unit, the subtrahend
+    /// scaled by a pure number (a − 0.7 b: how far a exceeds 70 % of b). Saturates at the
+    /// [`Signal`](crate::Signal) range.
     Difference {
         /// Minuend.
         a: N,
         /// Subtrahend.
         b: N,
+        /// The subtrahend's factor, |gain| below 32768 in steps of 2⁻¹⁶; 1 by default.
+        #[cfg_attr(feature = "serde", serde(default = "unit_gain"))]
+        gain: f32,
     },
     /// Dot product of two 2-vectors: a_x b_x + a_y b_y (e.g. force · desired velocity, in W).
     Dot {
@@ -106,15 +113,26 @@ pub enum StageSpec<N> {
         #[cfg_attr(feature = "serde", serde(deserialize_with = "exact_pair"))]
         of: [N; 2],
     },
+    /// The mean of the last N inputs (a moving average): what the input does over the
+    /// window, its fluctuations faster than the window averaged out (a window of 20 ms
+    /// nulls 50 Hz mains hum and all its harmonics). Until N samples have arrived it is the
+    /// mean of those that have.
+    Mean {
+        /// Source channel or feature.
+        input: N,
+        /// Window length N, 1..=[`MAX_WINDOW`] samples.
+        window: u16,
+    },
     /// Short-time energy (the paper's eq. 17): ζ_n = Σ_{m=0}^{N−1} x²(n−m) h(m), with the
     /// window h normalized to sum 1, so ζ is a mean square in the input's unit squared
-    /// whatever N. Until N samples have arrived the missing ones count as zero. Inputs
-    /// saturate at ±2048 before squaring (so a window's sums fit 64 bits); the result
-    /// saturates at the [`Signal`](crate::Signal) range.
+    /// whatever N. Until N samples have arrived, a rectangular window is the mean square of
+    /// those that have, and a tapered one counts the missing ones as zero. Inputs saturate
+    /// at ±2048 before squaring (so a window's sums fit 64 bits); the result saturates at
+    /// the [`Signal`](crate::Signal) range.
     Ste {
         /// Source channel or feature.
         input: N,
-        /// Window length N, 1..=[`MAX_STE_WINDOW`] samples.
+        /// Window length N, 1..=[`MAX_WINDOW`] samples.
         window: u16,
         /// Window shape.
         #[cfg_attr(feature = "serde", serde(default = "default_window"))]
@@ -125,6 +143,11 @@ pub enum StageSpec<N> {
 #[cfg(feature = "serde")]
 fn default_window() -> Window {
     Window::Rectangular
+}
+
+#[cfg(feature = "serde")]
+fn unit_gain() -> f32 {
+    1.0
 }
 
 /// A 2-vector's inputs: a list of exactly two, so that a third is refused, not dropped.
@@ -196,13 +219,21 @@ impl<N> StageSpec<N> {
                 cutoff_hz: *cutoff_hz,
             },
             StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
-            StageSpec::Difference { a, b } => StageSpec::Difference { a: f(a)?, b: f(b)? },
+            StageSpec::Difference { a, b, gain } => StageSpec::Difference {
+                a: f(a)?,
+                b: f(b)?,
+                gain: *gain,
+            },
             StageSpec::Dot { a, b } => StageSpec::Dot {
                 a: [f(&a[0])?, f(&a[1])?],
                 b: [f(&b[0])?, f(&b[1])?],
             },
             StageSpec::Magnitude { of } => StageSpec::Magnitude {
                 of: [f(&of[0])?, f(&of[1])?],
+            },
+            StageSpec::Mean { input, window } => StageSpec::Mean {
+                input: f(input)?,
+                window: *window,
             },
             StageSpec::Ste {
                 input,
@@ -228,6 +259,7 @@ impl<N> StageSpec<N> {
             StageSpec::Difference { .. } => "difference",
             StageSpec::Dot { .. } => "dot",
             StageSpec::Magnitude { .. } => "magnitude",
+            StageSpec::Mean { .. } => "mean",
             StageSpec::Ste { .. } => "ste",
         }
     }
@@ -245,18 +277,19 @@ pub enum StageError {
         /// Half the detector rate, in Hz.
         nyquist_hz: f32,
     },
-    /// A cancellation's gain is not finite, not below 32768 in magnitude, or not zero but
-    /// below its resolution of 2⁻¹⁶.
+    /// A cancellation's or a difference's gain is not finite, not below 32768 in
+    /// magnitude, or not zero but below its resolution of 2⁻¹⁶.
     Gain {
         /// The gain.
         gain: f32,
     },
-    /// The STE window is empty or longer than [`MAX_STE_WINDOW`].
+    /// An STE or mean window is empty or longer than [`MAX_WINDOW`].
     WindowLength {
         /// The requested length.
         window: u16,
     },
-    /// The STE windows of all features together need more history than the detector holds.
+    /// The STE and mean windows of all features together need more history than the
+    /// detector holds.
     WindowPool {
         /// Samples needed so far, this feature included.
         needed: usize,
@@ -279,11 +312,11 @@ impl core::fmt::Display for StageError {
             ),
             StageError::WindowLength { window } => write!(
                 f,
-                "window = {window} must be between 1 and {MAX_STE_WINDOW} samples"
+                "window = {window} must be between 1 and {MAX_WINDOW} samples"
             ),
             StageError::WindowPool { needed } => write!(
                 f,
-                "the STE windows together need {needed} samples of history, more than the {STE_POOL} the detector holds"
+                "the STE and mean windows together need {needed} samples of history, more than the {WINDOW_POOL} the detector holds"
             ),
         }
     }
@@ -292,12 +325,12 @@ impl core::fmt::Display for StageError {
 /// Slots a stage can read: the channels, then the features.
 pub const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
 
-/// Samples of STE history the detector holds for all its STE features together.
-pub const STE_POOL: usize = 2 * MAX_STE_WINDOW;
+/// Samples of history the detector holds for all its STE and mean features together.
+pub const WINDOW_POOL: usize = 2 * MAX_WINDOW;
 
-// Slot and history reads mask the index with MAX_SLOTS - 1 or STE_POOL - 1: one
+// Slot and history reads mask the index with MAX_SLOTS - 1 or WINDOW_POOL - 1: one
 // instruction, no bounds check.
-const _: () = assert!(MAX_SLOTS.is_power_of_two() && STE_POOL.is_power_of_two());
+const _: () = assert!(MAX_SLOTS.is_power_of_two() && WINDOW_POOL.is_power_of_two());
 
 /// A compiled feature stage: input slots and precomputed coefficients, made by
 /// [`Stage::compile`] or read from an image, so always within the ranges the tick relies
@@ -335,9 +368,22 @@ pub enum StageKind {
         input: u8,
         rate: u32,
     },
-    Difference(u8, u8),
+    /// `a − gain · b`, `gain` in Q16.16 (never `i32::MIN`; 1 is exactly `a − b`).
+    Difference {
+        a: u8,
+        b: u8,
+        gain: i32,
+    },
     Dot([u8; 4]),
     Magnitude(u8, u8),
+    /// History of inputs `ring[offset..offset + len]` (Q16 as `i64` bits), a running sum
+    /// scaled by `recip` = 2²⁴/N once the window is full.
+    Mean {
+        input: u8,
+        offset: u16,
+        len: u16,
+        recip: u32,
+    },
     /// History of squares `ring[offset..offset + len]` (Q16, at most 2³⁸); rectangular windows keep a running sum and
     /// scale by `recip` = 2²⁴/N, tapered ones use `weights[offset..offset + len]` (Q24).
     Ste {
@@ -352,15 +398,20 @@ pub enum StageKind {
 /// Per-feature running state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct StageState {
-    /// Low-pass output in Q32, or the STE running sum of squares (Q16, below 2⁴⁶).
+    /// Low-pass output in Q32, or a window's running sum (of squares for STE, below 2⁴⁶; of
+    /// inputs for a mean, below 2³⁸ in magnitude; Q16).
     acc: i64,
     /// The previous input (rate).
     prev: i32,
-    /// Next STE history position to overwrite, relative to the feature's offset.
+    /// A window's next history position to overwrite, relative to the feature's offset; a
+    /// low-pass's samples seen while it warms up.
     pos: u16,
-    /// Whether the stage has seen a sample.
+    /// Whether the stage has seen a sample; a window's: whether it has filled.
     primed: bool,
 }
+
+/// The most samples a low-pass warms up over (its sample counter's range).
+const WARM_LIMIT: u16 = u16::MAX;
 
 impl Stage {
     /// Compiles a stage whose inputs are already resolved to slots. `pool_used` is the STE
@@ -370,7 +421,7 @@ impl Stage {
         spec: &StageSpec<u8>,
         rate_hz: f32,
         pool_used: &mut usize,
-        weights: &mut [u32; STE_POOL],
+        weights: &mut [u32; WINDOW_POOL],
     ) -> Result<Stage, StageError> {
         Ok(Stage(match *spec {
             StageSpec::Raw { input } => StageKind::Raw(input),
@@ -398,24 +449,28 @@ impl Stage {
                 input,
                 rate: (rate_hz * 256.0 + 0.5) as u32,
             },
-            StageSpec::Difference { a, b } => StageKind::Difference(a, b),
+            StageSpec::Difference { a, b, gain } => StageKind::Difference {
+                a,
+                b,
+                gain: gain_q16(gain)?,
+            },
             StageSpec::Dot { a, b } => StageKind::Dot([a[0], a[1], b[0], b[1]]),
             StageSpec::Magnitude { of } => StageKind::Magnitude(of[0], of[1]),
+            StageSpec::Mean { input, window } => {
+                let (offset, _) = take_window(window, pool_used, weights)?;
+                StageKind::Mean {
+                    input,
+                    offset,
+                    len: window,
+                    recip: window_recip(window),
+                }
+            }
             StageSpec::Ste {
                 input,
                 window,
                 shape,
             } => {
-                let n = usize::from(window);
-                if n == 0 || n > MAX_STE_WINDOW {
-                    return Err(StageError::WindowLength { window });
-                }
-                let offset = *pool_used;
-                let needed = offset + n;
-                let Some(taps) = weights.get_mut(offset..needed) else {
-                    return Err(StageError::WindowPool { needed });
-                };
-                *pool_used = needed;
+                let (offset, taps) = take_window(window, pool_used, weights)?;
                 let tapered = match shape {
                     Window::Rectangular => false,
                     Window::Triangular => {
@@ -425,9 +480,9 @@ impl Stage {
                 };
                 StageKind::Ste {
                     input,
-                    offset: offset as u16,
+                    offset,
                     len: window,
-                    recip: (((1u64 << 24) + n as u64 / 2) / n as u64) as u32,
+                    recip: window_recip(window),
                     tapered,
                 }
             }
@@ -441,7 +496,7 @@ impl Stage {
         &self,
         st: &mut StageState,
         values: &[i32; MAX_SLOTS],
-        ring: &mut [u64; STE_POOL],
+        ring: &mut [u64; WINDOW_POOL],
         weights: &[u32],
     ) -> i32 {
         // Slots are validated below MAX_SLOTS, a power of two: masking keeps every access
@@ -480,7 +535,11 @@ impl Stage {
                 st.prev = x;
                 out
             }
-            StageKind::Difference(a, b) => get(a).saturating_sub(get(b)),
+            StageKind::Difference { a, b, gain } => {
+                // |b · gain| < 2^62, so the scaled subtrahend and the difference fit.
+                let scaled = (i64::from(get(b)) * i64::from(gain)) >> 16;
+                sat32(i64::from(get(a)) - scaled)
+            }
             StageKind::Dot([ax, ay, bx, by]) => {
                 let p = i64::from(get(ax)) * i64::from(get(bx));
                 let q = i64::from(get(ay)) * i64::from(get(by));
@@ -490,6 +549,21 @@ impl Stage {
                 let (x, y) = (i64::from(get(x)), i64::from(get(y)));
                 let s = (x * x) as u64 + (y * y) as u64;
                 isqrt64(s).min(i32::MAX as u32) as i32
+            }
+            StageKind::Mean {
+                input,
+                offset,
+                len,
+                recip,
+            } => {
+                let x = i64::from(get(input));
+                let oldest = push_window(st, ring, offset, len, x as u64) as i64;
+                // Exact: what enters now leaves N ticks later; |sum| ≤ N · 2^31 ≤ 2^38.
+                st.acc += x - oldest;
+                // The clamp only matters for a detector loaded from a corrupt image whose
+                // windows overlap: it keeps the product below 2^62.
+                let sum = st.acc.clamp(-(i64::from(len) << 31), i64::from(len) << 31);
+                sat32((sum * i64::from(filled_recip(st, len, recip))) >> 24)
             }
             StageKind::Ste {
                 input,
@@ -501,13 +575,7 @@ impl Stage {
                 let x = i64::from(get(input)).clamp(-STE_INPUT_LIMIT, STE_INPUT_LIMIT);
                 let sq = ((x * x) >> 16) as u64;
                 let newest = usize::from(st.pos);
-                // A valid stage keeps offset + pos below STE_POOL, a power of two: the mask
-                // keeps even a state from another detector in bounds, for one instruction.
-                let oldest = core::mem::replace(
-                    &mut ring[(usize::from(offset) + newest) & (STE_POOL - 1)],
-                    sq,
-                );
-                st.pos = if st.pos + 1 >= len { 0 } else { st.pos + 1 };
+                let oldest = push_window(st, ring, offset, len, sq);
                 if tapered {
                     let start = usize::from(offset);
                     let n = usize::from(len);
@@ -534,11 +602,12 @@ impl Stage {
                     (acc >> 24).min(i32::MAX as u64) as i32
                 } else {
                     // Exact: what enters now leaves N ticks later. sum ≤ N · 2^38 and
-                    // recip ≤ 2^24 / N keep the product below 2^63.
+                    // recip ≤ 2^24 / n keep the product below 2^63.
                     st.acc += sq as i64 - oldest as i64;
                     // The clamp only matters for a detector loaded from a corrupt image
                     // whose windows overlap: it keeps the product in range.
                     let sum = (st.acc.max(0) as u64).min(u64::from(len) << 38);
+                    let recip = filled_recip(st, len, recip);
                     ((sum * u64::from(recip)) >> 24).min(i32::MAX as u64) as i32
                 }
             }
@@ -548,6 +617,66 @@ impl Stage {
 
 /// STE inputs saturate here before squaring: 2048 in raw 16.16 bits.
 const STE_INPUT_LIMIT: i64 = 2048 << 16;
+
+/// Writes `entry` at a window's newest position and returns the entry it replaces, the one
+/// that leaves the window (zero before the window has filled); advances the position and
+/// marks the window full when it wraps.
+#[inline(always)]
+fn push_window(
+    st: &mut StageState,
+    ring: &mut [u64; WINDOW_POOL],
+    offset: u16,
+    len: u16,
+    entry: u64,
+) -> u64 {
+    // A valid stage keeps offset + pos below WINDOW_POOL, a power of two: the mask keeps
+    // even a state from another detector in bounds, for one instruction.
+    let slot = &mut ring[(usize::from(offset) + usize::from(st.pos)) & (WINDOW_POOL - 1)];
+    let oldest = if st.primed { *slot } else { 0 };
+    *slot = entry;
+    st.pos += 1;
+    if st.pos >= len {
+        st.pos = 0;
+        st.primed = true;
+    }
+    oldest
+}
+
+/// 2²⁴ over the samples a window holds: `recip` (for N) once it has filled, else for the
+/// samples that have arrived (one 32-bit division, in hardware on the Cortex-M4).
+#[inline(always)]
+fn filled_recip(st: &StageState, len: u16, recip: u32) -> u32 {
+    if st.primed || st.pos == 0 || st.pos >= len {
+        recip
+    } else {
+        (1u32 << 24) / u32::from(st.pos)
+    }
+}
+
+/// Takes a window of `window` samples from the history pool: its offset and its taps.
+fn take_window<'w>(
+    window: u16,
+    pool_used: &mut usize,
+    weights: &'w mut [u32; WINDOW_POOL],
+) -> Result<(u16, &'w mut [u32]), StageError> {
+    let n = usize::from(window);
+    if n == 0 || n > MAX_WINDOW {
+        return Err(StageError::WindowLength { window });
+    }
+    let offset = *pool_used;
+    let needed = offset + n;
+    let Some(taps) = weights.get_mut(offset..needed) else {
+        return Err(StageError::WindowPool { needed });
+    };
+    *pool_used = needed;
+    Ok((offset as u16, taps))
+}
+
+/// 2²⁴ / N, rounded.
+fn window_recip(window: u16) -> u32 {
+    let n = u64::from(window);
+    (((1u64 << 24) + n / 2) / n) as u32
+}
 
 impl Stage {
     /// Appends this item to a detector image.
@@ -588,10 +717,11 @@ impl Stage {
                 w.u8(input);
                 w.u32(rate);
             }
-            StageKind::Difference(a, b) => {
+            StageKind::Difference { a, b, gain } => {
                 w.u8(StageTag::Difference as u8);
                 w.u8(a);
                 w.u8(b);
+                w.u32(gain as u32);
             }
             StageKind::Dot(s) => {
                 w.u8(StageTag::Dot as u8);
@@ -601,6 +731,18 @@ impl Stage {
                 w.u8(StageTag::Magnitude as u8);
                 w.u8(x);
                 w.u8(y);
+            }
+            StageKind::Mean {
+                input,
+                offset,
+                len,
+                recip,
+            } => {
+                w.u8(StageTag::Mean as u8);
+                w.u8(input);
+                w.u16(offset);
+                w.u16(len);
+                w.u32(recip);
             }
             StageKind::Ste {
                 input,
@@ -642,7 +784,17 @@ impl Stage {
                 input: r.u8()?,
                 rate: r.u32()?,
             },
-            Some(StageTag::Difference) => StageKind::Difference(r.u8()?, r.u8()?),
+            Some(StageTag::Difference) => StageKind::Difference {
+                a: r.u8()?,
+                b: r.u8()?,
+                gain: r.u32()? as i32,
+            },
+            Some(StageTag::Mean) => StageKind::Mean {
+                input: r.u8()?,
+                offset: r.u16()?,
+                len: r.u16()?,
+                recip: r.u32()?,
+            },
             Some(StageTag::Dot) => StageKind::Dot([r.u8()?, r.u8()?, r.u8()?, r.u8()?]),
             Some(StageTag::Magnitude) => StageKind::Magnitude(r.u8()?, r.u8()?),
             Some(StageTag::Ste) => {
@@ -682,8 +834,9 @@ impl StageKind {
             | StageKind::LowPass { input: i, .. }
             | StageKind::HighPass { input: i, .. }
             | StageKind::Rate { input: i, .. }
+            | StageKind::Mean { input: i, .. }
             | StageKind::Ste { input: i, .. } => (i as usize) < slots,
-            StageKind::Difference(a, b)
+            StageKind::Difference { a, b, .. }
             | StageKind::Magnitude(a, b)
             | StageKind::Cancel {
                 input: a,
@@ -709,19 +862,23 @@ impl StageKind {
                 Some("low-pass coefficient")
             }
             StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
+            StageKind::Difference { gain, .. } if gain == i32::MIN => Some("difference gain"),
             StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
-            StageKind::Ste {
+            StageKind::Mean {
+                offset, len, recip, ..
+            }
+            | StageKind::Ste {
                 offset, len, recip, ..
             } => {
                 let end = offset as usize + len as usize;
                 // recip · N ≤ 2^24 (plus rounding) keeps the running sum's product in 64 bits.
                 let scaled = recip as u64 * len as u64;
                 if len == 0
-                    || len as usize > MAX_STE_WINDOW
-                    || end > STE_POOL
+                    || len as usize > MAX_WINDOW
+                    || end > WINDOW_POOL
                     || scaled > (1 << 24) + len as u64
                 {
-                    Some("STE window")
+                    Some("window")
                 } else {
                     None
                 }
@@ -753,10 +910,11 @@ enum StageTag {
     Ste = 7,
     HighPass = 8,
     Cancel = 9,
+    Mean = 10,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 10] = [
+    const ALL: [StageTag; 11] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -767,6 +925,7 @@ impl StageTag {
         StageTag::Ste,
         StageTag::HighPass,
         StageTag::Cancel,
+        StageTag::Mean,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -797,7 +956,18 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                 "Cancel {{ input: {input}, motion: {motion}, alpha: {alpha}, gain: {gain} }}"
             ),
             StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
-            StageKind::Difference(a, b) => write!(f, "Difference({a}, {b})"),
+            StageKind::Difference { a, b, gain } => {
+                write!(f, "Difference {{ a: {a}, b: {b}, gain: {gain} }}")
+            }
+            StageKind::Mean {
+                input,
+                offset,
+                len,
+                recip,
+            } => write!(
+                f,
+                "Mean {{ input: {input}, offset: {offset}, len: {len}, recip: {recip} }}"
+            ),
             StageKind::Dot([a, b, c, d]) => write!(f, "Dot([{a}, {b}, {c}, {d}])"),
             StageKind::Magnitude(a, b) => write!(f, "Magnitude({a}, {b})"),
             StageKind::Ste {
@@ -825,7 +995,7 @@ impl Stage {
 
 /// Whether a stage's window taps in `weights` are what [`Stage::compile`] makes: a
 /// tapered window's sum exactly 2²⁴, which keeps its weighted sum in 64 bits.
-pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; STE_POOL]) -> bool {
+pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; WINDOW_POOL]) -> bool {
     match stage.0 {
         StageKind::Ste {
             offset,
@@ -869,21 +1039,35 @@ fn gain_q16(gain: f32) -> Result<i32, StageError> {
     }
 }
 
-/// One tick of the first-order low-pass y += α (x − y), α in Q31, the state in Q32. The
-/// first sample sets y.
+/// One tick of the first-order low-pass y += g (x − y), the state in Q32, the gain g in
+/// Q31: α, or while the filter warms up 1/n for its n-th sample, whichever is larger (the
+/// first sample sets y; until 1/n falls below α, y is the mean of the samples so far, to
+/// within the rounding of 1/n). The warm-up counts at most [`WARM_LIMIT`] samples.
 ///
-/// The output needs no saturation: with y = ⌊acc / 2¹⁶⌋ and 0 < α < 1, a step down adds
-/// ⌊(x − y) 2¹⁶ α⌋ ≥ (x − y) 2¹⁶, a step up less than (x − y) 2¹⁶, so the new y lies
+/// The output needs no saturation: with y = ⌊acc / 2¹⁶⌋ and 0 < g < 1, a step down adds
+/// ⌊(x − y) 2¹⁶ g⌋ ≥ (x − y) 2¹⁶, a step up less than (x − y) 2¹⁶, so the new y lies
 /// between x and the old y, inside the `i32` range (a property test holds it there).
 #[inline(always)]
 fn low_pass(st: &mut StageState, x: i32, alpha: u32) -> i32 {
     if !st.primed {
         st.primed = true;
+        st.pos = 1;
         st.acc = i64::from(x) << 16;
     } else {
-        // |diff| < 2^32 and alpha < 2^31, so the product fits in 63 bits.
+        let mut gain = alpha;
+        if st.pos < WARM_LIMIT {
+            st.pos += 1;
+            // n ≥ 2, so 2^31 / n ≤ 2^30 (one 32-bit division, in hardware on the chip).
+            let warm = (1u32 << 31) / u32::from(st.pos);
+            if warm > alpha {
+                gain = warm;
+            } else {
+                st.pos = WARM_LIMIT;
+            }
+        }
+        // |diff| < 2^32 and gain < 2^31, so the product fits in 63 bits.
         let diff = i64::from(x) - (st.acc >> 16);
-        st.acc += (diff * i64::from(alpha)) >> 15;
+        st.acc += (diff * i64::from(gain)) >> 15;
     }
     (st.acc >> 16) as i32
 }
@@ -961,11 +1145,11 @@ mod tests {
     use crate::num::Signal;
 
     fn run(spec: StageSpec<u8>, inputs: &[&[f64]]) -> Vec<f64> {
-        let mut weights = [0u32; STE_POOL];
+        let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
         let stage = Stage::compile(&spec, 1000.0, &mut used, &mut weights).expect("valid stage");
         let mut st = StageState::default();
-        let mut ring = [0u64; STE_POOL];
+        let mut ring = [0u64; WINDOW_POOL];
         (0..inputs[0].len())
             .map(|k| {
                 let mut values = [0i32; MAX_SLOTS];
@@ -1073,8 +1257,14 @@ mod tests {
             },
             &[&step],
         );
+        // α = 0.239: the warm-up's 1/n weighs more for the 2nd to 4th samples, so y is
+        // the mean so far (½, ⅔, ¾), then α takes over.
         let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI * 50.0));
-        assert!((y[1] - alpha).abs() < 1e-4, "{} vs {alpha}", y[1]);
+        for (k, mean) in [(1, 0.5), (2, 2.0 / 3.0), (3, 0.75)] {
+            assert!((y[k] - mean).abs() < 1e-4, "{k}: {} vs {mean}", y[k]);
+        }
+        let next = 0.75 + alpha * 0.25;
+        assert!((y[4] - next).abs() < 1e-4, "{} vs {next}", y[4]);
         assert!((y[300] - 1.0).abs() < 2.0 / 65536.0);
     }
 
@@ -1137,10 +1327,26 @@ mod tests {
         assert_eq!(mag[0], 5.0);
         assert!((mag[1] - 0.005).abs() < 2.0 / 65536.0);
         let diff = run(
-            StageSpec::Difference { a: 0, b: 1 },
+            StageSpec::Difference {
+                a: 0,
+                b: 1,
+                gain: 1.0,
+            },
             &[&[1.0, -30000.0], &[3.0, 30000.0]],
         );
         assert_eq!(diff, vec![-2.0, Signal::MIN.to_f64()]);
+        // a − 0.7 b: 10 − 7 = 3; saturates low.
+        let scaled = run(
+            StageSpec::Difference {
+                a: 0,
+                b: 1,
+                gain: 0.7,
+            },
+            &[&[10.0, -30000.0], &[10.0, 30000.0]],
+        );
+        // 0.7 in Q16.16 is 0.699997: 10 − 6.99997.
+        assert!((scaled[0] - 3.0).abs() < 1e-4, "{scaled:?}");
+        assert_eq!(scaled[1], Signal::MIN.to_f64());
         assert_eq!(
             run(StageSpec::Abs { input: 0 }, &[&[-1.5, 2.0]]),
             vec![1.5, 2.0]
@@ -1166,11 +1372,16 @@ mod tests {
                     Window::Triangular => (n + 1) as f64 - ((2 * m) as f64 - (n - 1) as f64).abs(),
                 })
                 .collect();
-            let total: f64 = h.iter().sum();
+            // Before n samples, the rectangular window is the mean square of those that
+            // have arrived; the triangular one counts the missing as zero.
+            let total = |k: usize| match shape {
+                Window::Rectangular => (k + 1).min(n) as f64,
+                Window::Triangular => h.iter().sum(),
+            };
             for k in 0..x.len() {
                 let expect: f64 = (0..n)
                     .filter(|&m| m <= k)
-                    .map(|m| x[k - m] * x[k - m] * h[m] / total)
+                    .map(|m| x[k - m] * x[k - m] * h[m] / total(k))
                     .sum();
                 assert!(
                     (y[k] - expect).abs() < 1e-3,
@@ -1197,7 +1408,7 @@ mod tests {
 
     #[test]
     fn bad_stage_parameters() {
-        let mut weights = [0u32; STE_POOL];
+        let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
         let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights);
         assert_eq!(
@@ -1228,18 +1439,18 @@ mod tests {
         assert_eq!(
             compile(StageSpec::Ste {
                 input: 0,
-                window: MAX_STE_WINDOW as u16 + 1,
+                window: MAX_WINDOW as u16 + 1,
                 shape: Window::Rectangular
             }),
             Err(StageError::WindowLength {
-                window: MAX_STE_WINDOW as u16 + 1
+                window: MAX_WINDOW as u16 + 1
             })
         );
         for _ in 0..2 {
             assert!(
                 compile(StageSpec::Ste {
                     input: 0,
-                    window: MAX_STE_WINDOW as u16,
+                    window: MAX_WINDOW as u16,
                     shape: Window::Triangular
                 })
                 .is_ok()
@@ -1252,7 +1463,7 @@ mod tests {
                 shape: Window::Rectangular
             }),
             Err(StageError::WindowPool {
-                needed: STE_POOL + 1
+                needed: WINDOW_POOL + 1
             })
         );
     }

@@ -45,9 +45,9 @@ pub const MAX_TERMS: usize = 8;
 pub const MAX_DISTINCT_TERMS: usize = 64;
 /// Longest name of a channel, feature, event or phase, in bytes.
 pub const NAME_LEN: usize = 24;
-/// Longest short-time-energy window, in samples. All STE features together hold at most
-/// twice this much history.
-pub const MAX_STE_WINDOW: usize = 128;
+/// Longest window of a short-time-energy or mean feature, in samples. All such features
+/// together hold at most twice this much history.
+pub const MAX_WINDOW: usize = 128;
 
 const _: () = assert!(MAX_CHANNELS <= ChannelMask::BITS as usize);
 const _: () = assert!(MAX_EVENTS <= EventMask::BITS as usize);

@@ -9,7 +9,7 @@ use heapless::Vec;
 
 use crate::cdf::Cdf;
 use crate::expr::Rust;
-use crate::feature::{MAX_SLOTS, STE_POOL, Stage, StageState};
+use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL};
 use crate::image::{ImageError, Reader, Sink};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::{MAX_CHANNELS, MAX_DISTINCT_TERMS as MAX_PSI, MAX_EVENTS, MAX_FEATURES};
@@ -277,7 +277,7 @@ pub struct State {
     /// Channel samples then feature values, raw 16.16.
     pub(crate) values: [i32; MAX_SLOTS],
     pub(crate) stages: [StageState; MAX_FEATURES],
-    pub(crate) ring: [u64; STE_POOL],
+    pub(crate) ring: [u64; WINDOW_POOL],
     /// Each ψ's confidence at the last tick (Q15), by the detector's ψ index.
     pub(crate) psi: [u16; MAX_PSI],
     pub(crate) events: [EventState; MAX_EVENTS],

@@ -197,12 +197,23 @@ enum Stage {
         input: usize,
         rate: f64,
     },
-    Difference(usize, usize),
+    Difference {
+        a: usize,
+        b: usize,
+        gain: f64,
+    },
     Dot([usize; 2], [usize; 2]),
     Magnitude([usize; 2]),
+    Mean {
+        input: usize,
+        window: usize,
+    },
     Ste {
         input: usize,
         h: Vec<f64>,
+        /// Whether the window is rectangular: then, until it has filled, the mean square
+        /// of the samples that have arrived.
+        rectangular: bool,
     },
 }
 
@@ -250,21 +261,38 @@ pub struct Model {
 struct StageState {
     /// Low-pass output.
     y: f64,
-    /// Previous input (rate, low-pass), if any.
+    /// Previous input (rate), if any.
     previous: Option<f64>,
-    /// Inputs, most recent last (STE), at most the window length.
+    /// Inputs, most recent last (STE, mean), at most the window length.
     history: Vec<f64>,
+    /// Samples the low-pass has seen.
+    seen: u32,
 }
 
+/// The most samples a low-pass warms up over.
+const WARM_LIMIT: u32 = 65535;
+
 impl StageState {
-    /// One tick of the low-pass y += α (x − y); the first sample sets y.
+    /// One tick of the low-pass y += g (x − y) with g = max(α, 1/n) for the n-th sample
+    /// while n ≤ [`WARM_LIMIT`], α after: the mean of the samples so far until α weighs more.
     fn low_pass(&mut self, x: f64, alpha: f64) -> f64 {
-        if self.previous.is_none() {
-            self.y = x;
-        }
-        self.previous = Some(x);
-        self.y += alpha * (x - self.y);
+        self.seen = self.seen.saturating_add(1);
+        let warm = if self.seen <= WARM_LIMIT {
+            1.0 / f64::from(self.seen)
+        } else {
+            0.0
+        };
+        self.y += alpha.max(warm) * (x - self.y);
         self.y
+    }
+
+    /// Adds `x` to the window history of `n` samples and returns it.
+    fn window(&mut self, x: f64, n: usize) -> &[f64] {
+        self.history.push(x);
+        if self.history.len() > n {
+            self.history.remove(0);
+        }
+        &self.history
     }
 }
 
@@ -403,9 +431,17 @@ impl Model {
                     gain: f64::from(gain),
                 },
                 StageSpec::Rate { input } => Stage::Rate { input, rate },
-                StageSpec::Difference { a, b } => Stage::Difference(a, b),
+                StageSpec::Difference { a, b, gain } => Stage::Difference {
+                    a,
+                    b,
+                    gain: f64::from(gain),
+                },
                 StageSpec::Dot { a, b } => Stage::Dot(a, b),
                 StageSpec::Magnitude { of } => Stage::Magnitude(of),
+                StageSpec::Mean { input, window } => Stage::Mean {
+                    input,
+                    window: usize::from(window),
+                },
                 StageSpec::Ste {
                     input,
                     window: n,
@@ -413,6 +449,7 @@ impl Model {
                 } => Stage::Ste {
                     input,
                     h: window(shape, usize::from(n)),
+                    rectangular: shape == Window::Rectangular,
                 },
             });
             feature_channels.push(deps);
@@ -548,16 +585,26 @@ impl Model {
                     st.previous = Some(x);
                     r
                 }
-                Stage::Difference(a, b) => v(*a) - v(*b),
+                Stage::Difference { a, b, gain } => v(*a) - gain * v(*b),
                 Stage::Dot(a, b) => v(a[0]) * v(b[0]) + v(a[1]) * v(b[1]),
                 Stage::Magnitude(of) => v(of[0]).hypot(v(of[1])),
-                Stage::Ste { input, h } => {
-                    st.history.push(v(*input));
-                    if st.history.len() > h.len() {
-                        st.history.remove(0);
+                Stage::Mean { input, window } => {
+                    let history = st.window(v(*input), *window);
+                    history.iter().sum::<f64>() / history.len() as f64
+                }
+                Stage::Ste {
+                    input,
+                    h,
+                    rectangular,
+                } => {
+                    let history = st.window(v(*input), h.len());
+                    if *rectangular {
+                        history.iter().map(|x| x * x).sum::<f64>() / history.len() as f64
+                    } else {
+                        // h(m) weighs the sample m ticks ago: the newest is at the
+                        // history's end; missing samples count as zero.
+                        history.iter().rev().zip(h).map(|(x, w)| x * x * w).sum()
                     }
-                    // h(m) weighs the sample m ticks ago: the newest is at the history's end.
-                    st.history.iter().rev().zip(h).map(|(x, w)| x * x * w).sum()
                 }
             };
             slots.push(saturate(value));

@@ -383,6 +383,7 @@ fn faults_follow_feature_chains() {
                 StageSpec::Difference {
                     a: name("x"),
                     b: name("k"),
+                    gain: 1.0,
                 },
             ),
             (

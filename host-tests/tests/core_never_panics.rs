@@ -129,7 +129,17 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
                 cutoff_hz
             }),
         n().prop_map(|input| StageSpec::Rate { input }),
-        (n(), n()).prop_map(|(a, b)| StageSpec::Difference { a, b }),
+        (
+            n(),
+            n(),
+            prop_oneof![1 => any_f32(), 2 => Just(1.0f32), 6 => -40_000.0f32..40_000.0]
+        )
+            .prop_map(|(a, b, gain)| StageSpec::Difference { a, b, gain }),
+        (
+            n(),
+            prop_oneof![1 => any::<u16>(), 1 => 0u16..=140, 20 => 1u16..=128]
+        )
+            .prop_map(|(input, window)| StageSpec::Mean { input, window }),
         (n(), n(), n(), n()).prop_map(|(a, b, c, d)| StageSpec::Dot {
             a: [a, b],
             b: [c, d]
@@ -440,7 +450,7 @@ proptest! {
     /// build far more often, so `tick` sees many shapes of detector.
     #[test]
     fn plausible_configs_tick_without_panicking(
-        kinds in prop::collection::vec((0u8..10, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
+        kinds in prop::collection::vec((0u8..11, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
         cdfs in prop::collection::vec((plausible_cdf(), any::<u8>(), 0.0f32..=0.25), 1..=8),
         masks in prop::collection::vec(any::<u8>(), 1..=3),
         ticks in prop::collection::vec(any_tick(), 1..=TICKS),
@@ -455,11 +465,12 @@ proptest! {
                 1 => StageSpec::Abs { input: p(0) },
                 2 => StageSpec::LowPass { input: p(0), cutoff_hz: *cutoff },
                 3 => StageSpec::Rate { input: p(0) },
-                4 => StageSpec::Difference { a: p(0), b: p(1) },
+                4 => StageSpec::Difference { a: p(0), b: p(1), gain: *cutoff - 200.0 },
                 5 => StageSpec::Dot { a: [p(0), p(1)], b: [p(2), p(3)] },
                 6 => StageSpec::Magnitude { of: [p(0), p(1)] },
                 7 => StageSpec::HighPass { input: p(0), cutoff_hz: *cutoff },
                 8 => StageSpec::Cancel { input: p(0), motion: p(1), gain: *cutoff - 200.0, cutoff_hz: *cutoff },
+                9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };
             let n = format!("f{k}");

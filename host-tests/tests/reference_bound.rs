@@ -14,7 +14,9 @@
 //!   `high − low`, the bell's half-width, each flat-bell shoulder);
 //! - `δ_f` is the feature's proven error bound (`reference_features.rs` checks each stage),
 //!   carried through chains of features: raw/abs pass the input's error on, a difference adds
-//!   its inputs', low-pass adds `2⁻¹⁶ + 2⁻²⁰ max|x|`, the dot product `2⁻¹⁶ + |a|δ_b + |b|δ_a`,
+//!   its inputs' (the subtrahend's times |gain|, plus `2⁻¹⁶ + 2⁻¹⁷ max|b|` at a gain other
+//!   than 1), low-pass adds `2⁻¹⁶ + (2⁻²⁰ + W 2⁻³¹) max|x|` (W the samples it warms up
+//!   over), the mean `2⁻¹⁶ + N 2⁻²⁴ max|x|`, the dot product `2⁻¹⁶ + |a|δ_b + |b|δ_a`,
 //!   the magnitude `2⁻¹⁶ + 2⁻¹⁵ max|m| + δ_x + δ_y`, the STE
 //!   `2⁻¹⁵ + N 2⁻²³ max x² + N 2⁻²⁵ max ζ + 2 max|x| δ_x + δ_x²`, the rate
 //!   `2⁻⁸ max|Δx| + 2⁻¹⁶` (its input must be exact).
@@ -203,7 +205,7 @@ fn plan() -> impl Strategy<Value = Plan> {
         prop::collection::vec(any::<i32>(), TICKS),
     )
         .prop_map(|(k, mode, words)| ChannelPlan { k, mode, words });
-    let feature = (0u8..9, any::<[u8; 4]>(), any::<u16>())
+    let feature = (0u8..10, any::<[u8; 4]>(), any::<u16>())
         .prop_map(|(kind, picks, param)| FeaturePlan { kind, picks, param });
     (
         rate,
@@ -282,11 +284,40 @@ fn stage_for(
         }
         4 => {
             let b = pick(1);
+            // An even parameter: a plain difference; an odd one: a gain within ±2.
+            let gain = if p.param.is_multiple_of(2) {
+                1.0
+            } else {
+                snap(f64::from(p.param / 2) / 8192.0 - 2.0)
+            };
             (
-                StageSpec::Difference { a: n(a), b: n(b) },
+                StageSpec::Difference {
+                    a: n(a),
+                    b: n(b),
+                    gain,
+                },
                 SlotInfo {
-                    bound: bound_cap(ia.bound + info[b].bound),
-                    exact: ia.exact && info[b].exact,
+                    bound: bound_cap(ia.bound + f64::from(gain).abs() * info[b].bound),
+                    exact: gain == 1.0 && ia.exact && info[b].exact,
+                },
+            )
+        }
+        9 => {
+            // A mean within the pool.
+            let left = detector_core::feature::WINDOW_POOL - *pool;
+            let window = (usize::from(p.param) % 128 + 1).min(left);
+            if window == 0 {
+                return (StageSpec::Raw { input: n(a) }, ia);
+            }
+            *pool += window;
+            (
+                StageSpec::Mean {
+                    input: n(a),
+                    window: window as u16,
+                },
+                SlotInfo {
+                    bound: ia.bound,
+                    exact: false,
                 },
             )
         }
@@ -316,7 +347,7 @@ fn stage_for(
         _ => {
             // STE of a slot bounded below 256, channel 0 otherwise; within the pool.
             let s = if ia.bound < 256.0 { a } else { 0 };
-            let left = detector_core::feature::STE_POOL - *pool;
+            let left = detector_core::feature::WINDOW_POOL - *pool;
             let window = (usize::from(p.param) % 128 + 1).min(left);
             if window == 0 {
                 return (StageSpec::Raw { input: n(s) }, info[s]);

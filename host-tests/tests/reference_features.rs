@@ -5,13 +5,19 @@
 //! | stage | inputs | bound |
 //! |---|---|---|
 //! | raw, abs, difference | any | exact (saturating at the `Signal` range) |
+//! | difference, gain g ≠ 1 | any, |g| < 4 | `1 LSB + 2⁻¹⁷ |b|` (saturating) |
 //! | rate | any, integer rate | exact (saturating) |
 //! | rate | any, any rate | `2⁻⁸ |Δx| + 1 LSB` (the rate is held to 1/256 Hz) |
 //! | dot | any | 1 LSB (saturating) |
 //! | magnitude | any | `1 LSB + 2⁻¹⁵ |m|` (16 significant bits above 1 unit) |
-//! | low-pass | `|x| < 16384`, `f_s/1000 ≤ f_c ≤ 0.45 f_s` | `1 LSB + 2⁻²⁰ max|x|` |
+//! | low-pass | `|x| < 16384`, `f_s/10⁵ ≤ f_c ≤ 0.45 f_s` | `1 LSB + (2⁻²⁰ + W 2⁻³¹) max|x|`, W = min(⌈1/α⌉, 65535) |
 //! | high-pass | as the low-pass | as the low-pass, and bit for bit `x − low_pass(x)` |
+//! | mean | any, N in 1..=128 | `1 LSB + N 2⁻²⁴ max|x|` |
 //! | STE, eq. 17 | `|x| < 256`, N in 1..=128 | `2 LSB + N 2⁻²³ max x² + N 2⁻²⁵ ζ` |
+//!
+//! The low-pass's W term is its warm-up: while 1/n weighs more than α, its n-th sample
+//! weighs 1/n rounded down to 2⁻³¹, an error the running mean it then is carries about n/2
+//! times.
 //!
 //! The STE bound's middle term is the Q24 rounding of the window taps (a triangular window's
 //! end taps are only about 2⁻¹² of the window, so their relative rounding is 2⁻¹²), the last
@@ -84,6 +90,7 @@ fn stage(kind: &str) -> StageSpec<String> {
         "difference" => StageSpec::Difference {
             a: name("x"),
             b: name("y"),
+            gain: 1.0,
         },
         "rate" => StageSpec::Rate { input: name("x") },
         "dot" => StageSpec::Dot {
@@ -152,23 +159,68 @@ proptest! {
         }
     }
 
-    /// The low-pass (backward Euler, α = Δt/(τ + Δt), seeded with the first sample): within
-    /// 1 LSB + 2⁻²⁰ max|x| for inputs below 16384 and cut-offs from f_s/1000 to 0.45 f_s.
+    /// The low-pass (backward Euler, α = Δt/(τ + Δt), warming up as the mean of what it has
+    /// seen): within its bound for inputs below 16384 and cut-offs from f_s/10⁵ to 0.45 f_s.
     #[test]
     fn low_pass_within_bound(
         rate in 10.0f32..=50_000.0,
-        fraction in 0.001f32..=0.45,
+        fraction in prop_oneof![0.001f32..=0.45, 0.00001f32..=0.001],
         s in samples(4, 29, 300),
     ) {
         let lp = |cutoff_hz| StageSpec::LowPass { input: name("x"), cutoff_hz };
-        let c = features_config(rate, vec![("lp", lp(rate * fraction)), ("lp2", lp(rate * 0.45))]);
+        let cutoffs = [rate * fraction, rate * 0.45];
+        let c = features_config(rate, vec![("lp", lp(cutoffs[0])), ("lp2", lp(cutoffs[1]))]);
         let mut max_x: f64 = 0.0;
         for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
             max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
             for i in 0..2 {
-                prop_assert!((got[i] - want[i]).abs() <= LSB + max_x / 1_048_576.0,
-                    "feature {} tick {}: engine {} model {}", i, t, got[i], want[i]);
+                let bound = low_pass_bound(rate, cutoffs[i], max_x);
+                prop_assert!((got[i] - want[i]).abs() <= bound,
+                    "feature {} tick {}: engine {} model {} bound {:e}", i, t, got[i], want[i], bound);
             }
+        }
+    }
+
+    /// A difference with a gain: within 1 LSB + 2⁻¹⁷ |b| of a − g b (the scaled subtrahend
+    /// floored, the gain rounded to 2⁻¹⁶), saturating; a gain of 1 is bit for bit the plain
+    /// difference.
+    #[test]
+    fn difference_with_a_gain_within_bound(
+        gain in -4.0f32..4.0,
+        s in samples(4, 31, 80),
+    ) {
+        let diff = |gain| StageSpec::Difference { a: name("x"), b: name("y"), gain };
+        let c = features_config(5000.0, vec![
+            ("scaled", diff(gain)),
+            ("unit", diff(1.0)),
+            ("plain", StageSpec::Difference { a: name("x"), b: name("y"), gain: 1.0 }),
+        ]);
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            let b = Signal::from_bits(row[1]).to_f64().abs();
+            prop_assert!((got[0] - want[0]).abs() <= LSB + b / 131_072.0,
+                "tick {}: engine {} model {}", t, got[0], want[0]);
+            let x = Signal::from_bits(row[0]).to_f64();
+            let y = Signal::from_bits(row[1]).to_f64();
+            prop_assert_eq!(got[1], Signal::from_f64(x - y).to_f64(), "tick {}", t);
+        }
+    }
+
+    /// The mean of the last N inputs (of those that have arrived, before N have): within
+    /// 1 LSB + N 2⁻²⁴ max|x| of the model, for any input and N in 1..=128.
+    #[test]
+    fn mean_within_bound(
+        n in 1u16..=128,
+        s in samples(4, 31, 300),
+    ) {
+        let c = features_config(5000.0, vec![
+            ("mean", StageSpec::Mean { input: name("x"), window: n }),
+        ]);
+        let mut max_x: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
+            let bound = LSB + f64::from(n) * max_x / 16_777_216.0;
+            prop_assert!((got[0] - want[0]).abs() <= bound,
+                "tick {}: engine {} model {} bound {:e}", t, got[0], want[0], bound);
         }
     }
 
@@ -184,13 +236,14 @@ proptest! {
         let c = features_config(rate, vec![
             ("hp", StageSpec::HighPass { input: name("x"), cutoff_hz }),
             ("lp", StageSpec::LowPass { input: name("x"), cutoff_hz }),
-            ("diff", StageSpec::Difference { a: name("x"), b: name("lp") }),
+            ("diff", StageSpec::Difference { a: name("x"), b: name("lp"), gain: 1.0 }),
         ]);
         let mut max_x: f64 = 0.0;
         for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
             max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
             prop_assert_eq!(got[0].to_bits(), got[2].to_bits(), "tick {}", t);
-            prop_assert!((got[0] - want[0]).abs() <= LSB + max_x / 1_048_576.0,
+            let bound = low_pass_bound(rate, cutoff_hz, max_x);
+            prop_assert!((got[0] - want[0]).abs() <= bound,
                 "tick {}: engine {} model {}", t, got[0], want[0]);
         }
     }
@@ -222,7 +275,7 @@ proptest! {
         let mut max_y: f64 = 0.0;
         for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
             max_y = max_y.max(Signal::from_bits(row[1]).to_f64().abs());
-            let bound = 2.0 * LSB + g * (LSB + max_y / 1_048_576.0) + max_y / 131_072.0;
+            let bound = 2.0 * LSB + g * low_pass_bound(rate, cutoff_hz, max_y) + max_y / 131_072.0;
             prop_assert!((got[0] - want[0]).abs() <= bound,
                 "tick {}: engine {} model {} bound {:e}", t, got[0], want[0], bound);
             let x = Signal::from_bits(row[0]).to_f64();
@@ -235,7 +288,9 @@ proptest! {
     }
 
     /// The short-time energy against eq. 17 with the normalized window, both shapes, windows
-    /// 1..=128, inputs below 256 in magnitude, from the first tick (missing samples zero).
+    /// 1..=128, inputs below 256 in magnitude, from the first tick (before N samples, the
+    /// rectangular window's mean square of those that have arrived, the triangular window's
+    /// missing samples zero).
     #[test]
     fn ste_matches_eq_17(
         n1 in 1u16..=128,
@@ -262,7 +317,8 @@ proptest! {
 }
 
 /// Eq. 17 by hand for a constant input: after N samples ζ = x² whatever the window; before,
-/// the rectangular window gives (k + 1) x² / N after k + 1 samples.
+/// the rectangular window is the mean square of what has arrived, x², and the triangular one
+/// counts the missing samples as zero.
 #[test]
 fn ste_of_a_constant_by_hand() {
     let ste = |window, shape| StageSpec::Ste {
@@ -277,7 +333,7 @@ fn ste_of_a_constant_by_hand() {
             ("tri", ste(5, Window::Triangular)),
         ],
     );
-    // x = 3: x² = 9. Rectangular N = 4: 9/4, 18/4, 27/4, 9, 9.
+    // x = 3: x² = 9. Rectangular N = 4: 9 from the first sample.
     // Triangular N = 5: taps ∝ 1 − |2m − 4|/6 = 1/3, 2/3, 1, 2/3, 1/3 (sum 3), so
     // h = 1/9, 2/9, 3/9, 2/9, 1/9 and the partial sums of 9 h are 1, 3, 6, 8, 9.
     let x = 3 << 16;
@@ -285,7 +341,7 @@ fn ste_of_a_constant_by_hand() {
         .into_iter()
         .map(|(g, _)| (g[0], g[1]))
         .collect();
-    let rect = [2.25, 4.5, 6.75, 9.0, 9.0, 9.0];
+    let rect = [9.0; 6];
     let tri = [1.0, 3.0, 6.0, 8.0, 9.0, 9.0];
     for (t, (r, tr)) in got.into_iter().enumerate() {
         assert!((r - rect[t]).abs() <= 2.0 * LSB, "rect tick {t}: {r}");
@@ -293,7 +349,8 @@ fn ste_of_a_constant_by_hand() {
     }
 }
 
-/// The low-pass by hand: at f_c = f_s / (2π), τ = Δt so α = ½; seeded with the first sample.
+/// The low-pass by hand: at f_c = f_s / (2π), τ = Δt so α = ½; seeded with the first sample
+/// (the warm-up's 1/n never weighs more than ½ after it).
 #[test]
 fn low_pass_by_hand() {
     let rate = 1000.0f32;
@@ -319,8 +376,55 @@ fn low_pass_by_hand() {
     }
 }
 
+/// The low-pass warms up as the mean of what it has seen: at f_c = 1 Hz and f_s = 1 kHz
+/// (α ≈ 1/160), inputs 1, 2, 3, 4, 100 give 1, 1.5, 2, 2.5, 22; a mean's window of 3 gives
+/// 1, 1.5, 2, 3, 35.667.
+#[test]
+fn low_pass_and_mean_warm_up_as_the_mean_so_far() {
+    let c = features_config(
+        1000.0,
+        vec![
+            (
+                "lp",
+                StageSpec::LowPass {
+                    input: name("x"),
+                    cutoff_hz: 1.0,
+                },
+            ),
+            (
+                "mean",
+                StageSpec::Mean {
+                    input: name("x"),
+                    window: 3,
+                },
+            ),
+        ],
+    );
+    let s = [1, 2, 3, 4, 100].map(|v| [v << 16, 0, 0, 0]);
+    let lp = [1.0, 1.5, 2.0, 2.5, 22.0];
+    let mean = [1.0, 1.5, 2.0, 3.0, 107.0 / 3.0];
+    for (t, (got, model)) in run(&c, &s).into_iter().enumerate() {
+        assert!(
+            (got[0] - lp[t]).abs() <= 4.0 * LSB,
+            "low-pass tick {t}: {}",
+            got[0]
+        );
+        assert!(
+            (model[0] - lp[t]).abs() <= 1e-9,
+            "model tick {t}: {}",
+            model[0]
+        );
+        assert!(
+            (got[1] - mean[t]).abs() <= 2.0 * LSB,
+            "mean tick {t}: {}",
+            got[1]
+        );
+    }
+}
+
 /// Documented: the STE is a mean square saturating at the `Signal` range. One sample of 300
-/// in a rectangular window of 4 is 300²/4 = 22500, well inside the range.
+/// in a full rectangular window of 4 is 300²/4 = 22500, well inside the range; alone, before
+/// the window has filled, it is 300² and saturates.
 #[test]
 fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
     let c = features_config(
@@ -334,8 +438,10 @@ fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
             },
         )],
     );
-    let got = run(&c, &[[300 << 16, 0, 0, 0]]);
-    assert!((got[0].0[0] - 22500.0).abs() <= 2.0 * LSB, "{:?}", got[0]);
+    let got = run(&c, &[[0; 4], [0; 4], [0; 4], [300 << 16, 0, 0, 0]]);
+    assert!((got[3].0[0] - 22500.0).abs() <= 2.0 * LSB, "{:?}", got[3]);
+    let alone = run(&c, &[[300 << 16, 0, 0, 0]]);
+    assert_eq!(alone[0].0[0], Signal::MAX.to_f64(), "{:?}", alone[0]);
 }
 
 /// Documented: y += α (x − y). From y = 30000, x = −30000 at α = ½ gives 0, then −15000.
@@ -363,4 +469,11 @@ fn low_pass_follows_a_step_across_the_range() {
         );
         assert!((got[0] - want[t]).abs() <= 0.01, "tick {t}: {}", got[0]);
     }
+}
+
+/// The low-pass's bound at `cutoff_hz` on inputs of at most `max_x` (the module doc).
+fn low_pass_bound(rate_hz: f32, cutoff_hz: f32, max_x: f64) -> f64 {
+    let alpha = host_tests::reference::low_pass_alpha(f64::from(rate_hz), f64::from(cutoff_hz));
+    let warm = (1.0 / alpha).ceil().min(65535.0);
+    LSB + max_x * (1.0 / 1_048_576.0 + warm / 2_147_483_648.0)
 }

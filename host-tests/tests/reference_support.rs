@@ -297,11 +297,15 @@ pub fn model_series(config: &Config, samples: &[Vec<f64>]) -> Vec<Vec<f64>> {
 /// statistics over the run. Per stage, with `LSB = 2⁻¹⁶` (the bounds `reference_features.rs`
 /// checks, carried through chains):
 ///
-/// - raw, abs: the input's error; difference: the sum of its inputs';
+/// - raw, abs: the input's error; difference: `δ_a + |g| δ_b`, and at a gain other than
+///   1 `+ LSB + 2⁻¹⁷ max|b|` (the scaled subtrahend floored, the gain rounded to 2⁻¹⁶);
 /// - rate: 0 at an integer rate, else `2⁻⁸ max|Δx| + LSB` (its input assumed exact);
-/// - low-pass: the input's + `LSB + 2⁻²⁰ max|x|`;
-/// - high-pass: twice the input's + `LSB + 2⁻²⁰ max|x|` (the input less its low-pass);
-/// - cancel: the input's + `2 LSB + |g| (δ_m + LSB + 2⁻²⁰ max|m|) + 2⁻¹⁷ max|m|` (the
+/// - low-pass: the input's + `LSB + (2⁻²⁰ + W 2⁻³¹) max|x|`, W = min(⌈1/α⌉, 65535) the
+///   samples it warms up over (each warm-up gain 1/n rounded down to 2⁻³¹, an error the
+///   running mean carries n/2 times);
+/// - high-pass: twice the input's + the low-pass's own;
+/// - mean: the input's + `LSB + N 2⁻²⁴ max|x|` (2²⁴/n rounded);
+/// - cancel: the input's + `2 LSB + |g| (δ_m + the low-pass's own) + 2⁻¹⁷ max|m|` (the
 ///   motion's low-pass times the gain, the gain rounded to 2⁻¹⁶);
 /// - dot: `LSB + Σ |a| δ_b + |b| δ_a + δ_a δ_b`;
 /// - magnitude: `LSB + 2⁻¹⁵ max|m| + δ_x + δ_y`;
@@ -316,20 +320,31 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
         let d = |n: &str| delta[slot(n)];
         let m = |n: &str| stats[slot(n)].abs;
         let here = &stats[channels + k];
+        // A low-pass's own error at `cutoff_hz` on an input of at most `x`.
+        let low_pass = |cutoff_hz: f32, x: f64| {
+            let alpha = host_tests::reference::low_pass_alpha(
+                f64::from(config.rate_hz),
+                f64::from(cutoff_hz),
+            );
+            let warm = (1.0 / alpha).ceil().min(65535.0);
+            LSB + x * (1.0 / 1_048_576.0 + warm / 2_147_483_648.0)
+        };
         let e = match &f.stage {
             StageSpec::Raw { input } | StageSpec::Abs { input } => d(input),
-            StageSpec::LowPass { input, .. } => d(input) + LSB + m(input) / 1_048_576.0,
-            StageSpec::HighPass { input, .. } => 2.0 * d(input) + LSB + m(input) / 1_048_576.0,
+            StageSpec::LowPass { input, cutoff_hz } => d(input) + low_pass(*cutoff_hz, m(input)),
+            StageSpec::HighPass { input, cutoff_hz } => {
+                2.0 * d(input) + low_pass(*cutoff_hz, m(input))
+            }
             StageSpec::Cancel {
                 input,
                 motion,
                 gain,
-                ..
+                cutoff_hz,
             } => {
                 let g = f64::from(*gain).abs();
                 d(input)
                     + 2.0 * LSB
-                    + g * (d(motion) + LSB + m(motion) / 1_048_576.0)
+                    + g * (d(motion) + low_pass(*cutoff_hz, m(motion)))
                     + m(motion) / 131_072.0
             }
             StageSpec::Rate { input } => {
@@ -339,7 +354,18 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
                     stats[slot(input)].step / 256.0 + LSB
                 }
             }
-            StageSpec::Difference { a, b } => d(a) + d(b),
+            StageSpec::Difference { a, b, gain } => {
+                let g = f64::from(*gain);
+                let scaled = if g == 1.0 {
+                    0.0
+                } else {
+                    LSB + m(b) / 131_072.0
+                };
+                d(a) + g.abs() * d(b) + scaled
+            }
+            StageSpec::Mean { input, window } => {
+                d(input) + LSB + f64::from(*window) * m(input) / 16_777_216.0
+            }
             StageSpec::Dot { a, b } => {
                 LSB + m(&a[0]) * d(&b[0])
                     + m(&b[0]) * d(&a[0])
