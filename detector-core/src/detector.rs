@@ -273,8 +273,7 @@ impl Detector {
             let k = r.below(psis, "sensor term CDF")?;
             let weight = r.u16()?;
             total += u32::from(weight);
-            // The compiler allows the quantized weights two units of rounding above one.
-            if total > u32::from(Confidence::ONE.to_bits()) + 2 {
+            if total > crate::MAX_WEIGHT_SUM_Q15 {
                 return Err(ImageError::Invalid("term weights"));
             }
             sensor_channels |= use_psi(&mut self.psis, usize::from(k), bit);

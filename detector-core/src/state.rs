@@ -314,7 +314,8 @@ pub const fn product(acc: u32, q: u32) -> u32 {
 
 /// Eq. 14 from an event's context `product` (Q15) and the sum of its sensor terms'
 /// weight (Q15) × ψ (Q15): product × min(1, Σ w ψ), rounded to nearest. Weights sum to at
-/// most 2¹⁵ + 2, so the sum stays below 2³¹.
+/// most [`MAX_WEIGHT_SUM_Q15`](crate::MAX_WEIGHT_SUM_Q15) (2¹⁶ + 2), so the sum stays
+/// below 2³²  − 2¹⁴.
 #[inline(always)]
 pub const fn eq14(product: u32, weighted_sum: u32) -> Confidence {
     let sum = (weighted_sum + (1 << 14)) >> 15;

@@ -59,14 +59,27 @@ fn the_good_config_builds() {
     assert!(detector_build::build(&good()).is_ok());
 }
 
+/// Weights may sum to 2 (two terms each sufficient), not beyond.
 #[test]
-fn weights_summing_above_one() {
+fn weights_summing_above_two() {
+    let mut either = good();
+    for t in &mut either.events[0].sensor {
+        t.weight = 1.0;
+    }
+    assert!(detector_build::build(&either).is_ok());
     let err = reject(
-        |c| c.events[0].sensor[1].weight = 0.6,
-        &["event 'e'", "1.1", "above 1"],
+        |c| {
+            for t in &mut c.events[0].sensor {
+                t.weight = 1.0;
+            }
+            c.events[0]
+                .sensor
+                .push(sensor("fa", 0.25, sigmoid(0.0, 2.0)));
+        },
+        &["event 'e'", "2.25", "above 2"],
     );
     assert_eq!(err.item, Item::Event(name("e")));
-    assert!(matches!(err.problem, Problem::WeightSum(s) if (s - 1.1).abs() < 1e-6));
+    assert!(matches!(err.problem, Problem::WeightSum(s) if (s - 2.25).abs() < 1e-6));
 }
 
 #[test]
@@ -473,11 +486,11 @@ fn toml_errors() {
         other => panic!("expected an unknown-field error, got {other:?}"),
     }
     let mut bad = good();
-    bad.events[0].sensor[0].weight = 0.9;
+    bad.events[0].sensor[0].weight = 1.5;
     match Config::from_toml(&bad.to_toml()) {
         Err(LoadError::Invalid(e)) => {
-            assert_eq!(e.item, Item::Event(name("e")));
-            assert!(e.to_string().contains("1.4"), "{e}");
+            assert_eq!(e.item, item_sensor("e", "fa"));
+            assert!(e.to_string().contains("1.5"), "{e}");
         }
         other => panic!("expected a validation error, got {other:?}"),
     }

@@ -120,6 +120,25 @@ fn a_zero_context_vetoes() {
     );
 }
 
+/// Weights summing above 1 make either term sufficient: weights 1 and 1 on ψ = 1 and 0
+/// give Ψ = 1; on ψ = 1 and 1 the sum saturates at 1.
+#[test]
+fn weights_above_one_saturate() {
+    let e = event(
+        "e",
+        vec![],
+        vec![sensor("fa", 1.0, s04()), sensor("fb", 1.0, s04())],
+    );
+    check(
+        &raw_config(e.clone()),
+        [5.0, 0.0, 0.0, 0.0],
+        1.0,
+        &[1.0, 0.0],
+        0.0,
+    );
+    check(&raw_config(e), [5.0, 4.0, 0.0, 0.0], 1.0, &[1.0, 1.0], 0.0);
+}
+
 /// No context terms: Ψ is the weighted sum. Weights ¼, ¼, ½ on ψ = 1, ½, ⅛:
 /// ¼ + ⅛ + 1/16 = 7/16 = 0.4375 exactly. A bell centred at 0 of half-width 4 gives ⅞ at
 /// distance 1 (1 − S(¼)) and is the fourth term here with weight 0, contributing nothing.
