@@ -53,6 +53,18 @@ pub enum StageSpec<N> {
         /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
+    /// The input's envelope: up with the input at once, down as the
+    /// [`StageSpec::LowPass`] at `cutoff_hz` (y = x when x ≥ y, else y += α (x − y)):
+    /// what the input reached lately, forgotten with the time constant 1 / (2π f_c), e.g.
+    /// a commanded acceleration remembered while the structure it shook still rings.
+    /// Starts at the first sample.
+    Envelope {
+        /// Source channel or feature.
+        input: N,
+        /// Cut-off frequency f_c of its decay in Hz, above 0 and below half the detector
+        /// rate.
+        cutoff_hz: f32,
+    },
     /// First-order high-pass: x − y with y the [`StageSpec::LowPass`] of x at the same
     /// cut-off, i.e. what the input does above f_c, its offset and slow drift removed. Zero
     /// on the first tick. Bit for bit the `difference` of the input and its `low_pass`, in
@@ -203,6 +215,10 @@ impl<N> StageSpec<N> {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
             },
+            StageSpec::Envelope { input, cutoff_hz } => StageSpec::Envelope {
+                input: f(input)?,
+                cutoff_hz: *cutoff_hz,
+            },
             StageSpec::HighPass { input, cutoff_hz } => StageSpec::HighPass {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
@@ -253,6 +269,7 @@ impl<N> StageSpec<N> {
             StageSpec::Raw { .. } => "raw",
             StageSpec::Abs { .. } => "abs",
             StageSpec::LowPass { .. } => "low_pass",
+            StageSpec::Envelope { .. } => "envelope",
             StageSpec::HighPass { .. } => "high_pass",
             StageSpec::Cancel { .. } => "cancel",
             StageSpec::Rate { .. } => "rate",
@@ -350,6 +367,11 @@ pub enum StageKind {
         input: u8,
         alpha: u32,
     },
+    /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`].
+    Envelope {
+        input: u8,
+        alpha: u32,
+    },
     /// The input minus its low-pass, `alpha` as for [`StageKind::LowPass`].
     HighPass {
         input: u8,
@@ -430,6 +452,10 @@ impl Stage {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
             },
+            StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
+                input,
+                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+            },
             StageSpec::HighPass { input, cutoff_hz } => StageKind::HighPass {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
@@ -506,6 +532,20 @@ impl Stage {
             StageKind::Raw(i) => get(i),
             StageKind::Abs(i) => get(i).saturating_abs(),
             StageKind::LowPass { input, alpha } => low_pass(st, get(input), alpha),
+            StageKind::Envelope { input, alpha } => {
+                let x = get(input);
+                // Compared at the state's full resolution, not the output's: an input
+                // between the two decays the state instead of snapping it down.
+                if !st.primed || i64::from(x) << 16 >= st.acc {
+                    st.primed = true;
+                    st.acc = i64::from(x) << 16;
+                } else {
+                    // As the low-pass after its warm-up: |diff| < 2^32, alpha < 2^31.
+                    let diff = i64::from(x) - (st.acc >> 16);
+                    st.acc += (diff * i64::from(alpha)) >> 15;
+                }
+                (st.acc >> 16) as i32
+            }
             StageKind::HighPass { input, alpha } => {
                 let x = get(input);
                 x.saturating_sub(low_pass(st, x, alpha))
@@ -700,6 +740,11 @@ impl Stage {
                 w.u8(input);
                 w.u32(alpha);
             }
+            StageKind::Envelope { input, alpha } => {
+                w.u8(StageTag::Envelope as u8);
+                w.u8(input);
+                w.u32(alpha);
+            }
             StageKind::Cancel {
                 input,
                 motion,
@@ -774,6 +819,10 @@ impl Stage {
                 input: r.u8()?,
                 alpha: r.u32()?,
             },
+            Some(StageTag::Envelope) => StageKind::Envelope {
+                input: r.u8()?,
+                alpha: r.u32()?,
+            },
             Some(StageTag::Cancel) => StageKind::Cancel {
                 input: r.u8()?,
                 motion: r.u8()?,
@@ -832,6 +881,7 @@ impl StageKind {
             StageKind::Raw(i)
             | StageKind::Abs(i)
             | StageKind::LowPass { input: i, .. }
+            | StageKind::Envelope { input: i, .. }
             | StageKind::HighPass { input: i, .. }
             | StageKind::Rate { input: i, .. }
             | StageKind::Mean { input: i, .. }
@@ -855,6 +905,7 @@ impl StageKind {
         }
         match *self {
             StageKind::LowPass { alpha, .. }
+            | StageKind::Envelope { alpha, .. }
             | StageKind::HighPass { alpha, .. }
             | StageKind::Cancel { alpha, .. }
                 if alpha == 0 || alpha >= 1 << 31 =>
@@ -911,10 +962,11 @@ enum StageTag {
     HighPass = 8,
     Cancel = 9,
     Mean = 10,
+    Envelope = 11,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 11] = [
+    const ALL: [StageTag; 12] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -926,6 +978,7 @@ impl StageTag {
         StageTag::HighPass,
         StageTag::Cancel,
         StageTag::Mean,
+        StageTag::Envelope,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -945,6 +998,9 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
             }
             StageKind::HighPass { input, alpha } => {
                 write!(f, "HighPass {{ input: {input}, alpha: {alpha} }}")
+            }
+            StageKind::Envelope { input, alpha } => {
+                write!(f, "Envelope {{ input: {input}, alpha: {alpha} }}")
             }
             StageKind::Cancel {
                 input,

@@ -187,6 +187,10 @@ enum Stage {
         input: usize,
         alpha: f64,
     },
+    Envelope {
+        input: usize,
+        alpha: f64,
+    },
     Cancel {
         input: usize,
         motion: usize,
@@ -419,6 +423,10 @@ impl Model {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
                 },
+                StageSpec::Envelope { input, cutoff_hz } => Stage::Envelope {
+                    input,
+                    alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                },
                 StageSpec::Cancel {
                     input,
                     motion,
@@ -572,6 +580,16 @@ impl Model {
                 Stage::HighPass { input, alpha } => {
                     let x = v(*input);
                     x - st.low_pass(x, *alpha)
+                }
+                Stage::Envelope { input, alpha } => {
+                    let x = v(*input);
+                    st.seen = st.seen.saturating_add(1);
+                    st.y = if st.seen == 1 || x >= st.y {
+                        x
+                    } else {
+                        st.y + alpha * (x - st.y)
+                    };
+                    st.y
                 }
                 Stage::Cancel {
                     input,

@@ -116,6 +116,8 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
             .prop_map(|(input, cutoff_hz)| StageSpec::LowPass { input, cutoff_hz }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
+        (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
+            .prop_map(|(input, cutoff_hz)| StageSpec::Envelope { input, cutoff_hz }),
         (
             n(),
             n(),
@@ -450,7 +452,7 @@ proptest! {
     /// build far more often, so `tick` sees many shapes of detector.
     #[test]
     fn plausible_configs_tick_without_panicking(
-        kinds in prop::collection::vec((0u8..11, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
+        kinds in prop::collection::vec((0u8..12, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
         cdfs in prop::collection::vec((plausible_cdf(), any::<u8>(), 0.0f32..=0.25), 1..=8),
         masks in prop::collection::vec(any::<u8>(), 1..=3),
         ticks in prop::collection::vec(any_tick(), 1..=TICKS),
@@ -471,6 +473,7 @@ proptest! {
                 7 => StageSpec::HighPass { input: p(0), cutoff_hz: *cutoff },
                 8 => StageSpec::Cancel { input: p(0), motion: p(1), gain: *cutoff - 200.0, cutoff_hz: *cutoff },
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
+                10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };
             let n = format!("f{k}");

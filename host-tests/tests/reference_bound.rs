@@ -16,7 +16,7 @@
 //!   carried through chains of features: raw/abs pass the input's error on, a difference adds
 //!   its inputs' (the subtrahend's times |gain|, plus `2⁻¹⁶ + 2⁻¹⁷ max|b|` at a gain other
 //!   than 1), low-pass adds `2⁻¹⁶ + (2⁻²⁰ + W 2⁻³¹) max|x|` (W the samples it warms up
-//!   over), the mean `2⁻¹⁶ + N 2⁻²⁴ max|x|`, the dot product `2⁻¹⁶ + |a|δ_b + |b|δ_a`,
+//!   over), the envelope `2⁻¹⁶ + 2⁻²⁰ max|x|`, the mean `2⁻¹⁶ + N 2⁻²⁴ max|x|`, the dot product `2⁻¹⁶ + |a|δ_b + |b|δ_a`,
 //!   the magnitude `2⁻¹⁶ + 2⁻¹⁵ max|m| + δ_x + δ_y`, the STE
 //!   `2⁻¹⁵ + N 2⁻²³ max x² + N 2⁻²⁵ max ζ + 2 max|x| δ_x + δ_x²`, the rate
 //!   `2⁻⁸ max|Δx| + 2⁻¹⁶` (its input must be exact).
@@ -205,7 +205,7 @@ fn plan() -> impl Strategy<Value = Plan> {
         prop::collection::vec(any::<i32>(), TICKS),
     )
         .prop_map(|(k, mode, words)| ChannelPlan { k, mode, words });
-    let feature = (0u8..10, any::<[u8; 4]>(), any::<u16>())
+    let feature = (0u8..11, any::<[u8; 4]>(), any::<u16>())
         .prop_map(|(kind, picks, param)| FeaturePlan { kind, picks, param });
     (
         rate,
@@ -299,6 +299,21 @@ fn stage_for(
                 SlotInfo {
                     bound: bound_cap(ia.bound + f64::from(gain).abs() * info[b].bound),
                     exact: gain == 1.0 && ia.exact && info[b].exact,
+                },
+            )
+        }
+        10 => {
+            // Only inputs bounded below 16384, as the low-pass.
+            let s = if ia.bound < 16384.0 { a } else { 0 };
+            let f = 0.001 + 0.449 * f32::from(p.param) / 65535.0;
+            (
+                StageSpec::Envelope {
+                    input: n(s),
+                    cutoff_hz: rate_hz * f,
+                },
+                SlotInfo {
+                    bound: info[s].bound,
+                    exact: false,
                 },
             )
         }

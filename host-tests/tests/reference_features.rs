@@ -12,6 +12,7 @@
 //! | magnitude | any | `1 LSB + 2⁻¹⁵ |m|` (16 significant bits above 1 unit) |
 //! | low-pass | `|x| < 16384`, `f_s/10⁵ ≤ f_c ≤ 0.45 f_s` | `1 LSB + (2⁻²⁰ + W 2⁻³¹) max|x|`, W = min(⌈1/α⌉, 65535) |
 //! | high-pass | as the low-pass | as the low-pass, and bit for bit `x − low_pass(x)` |
+//! | envelope | as the low-pass | `1 LSB + 2⁻²⁰ max|x|` |
 //! | mean | any, N in 1..=128 | `1 LSB + N 2⁻²⁴ max|x|` |
 //! | STE, eq. 17 | `|x| < 256`, N in 1..=128 | `2 LSB + N 2⁻²³ max x² + N 2⁻²⁵ ζ` |
 //!
@@ -178,6 +179,27 @@ proptest! {
                 prop_assert!((got[i] - want[i]).abs() <= bound,
                     "feature {} tick {}: engine {} model {} bound {:e}", i, t, got[i], want[i], bound);
             }
+        }
+    }
+
+    /// The envelope: up with the input at once (exactly), down as the low-pass: within
+    /// 1 LSB + 2⁻²⁰ max|x| of the model, never below the input.
+    #[test]
+    fn envelope_within_bound(
+        rate in 10.0f32..=50_000.0,
+        fraction in 0.001f32..=0.45,
+        s in samples(4, 29, 300),
+    ) {
+        let c = features_config(rate, vec![
+            ("env", StageSpec::Envelope { input: name("x"), cutoff_hz: rate * fraction }),
+        ]);
+        let mut max_x: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            let x = Signal::from_bits(row[0]).to_f64();
+            max_x = max_x.max(x.abs());
+            prop_assert!(got[0] >= x, "tick {}: {} below the input {}", t, got[0], x);
+            prop_assert!((got[0] - want[0]).abs() <= LSB + max_x / 1_048_576.0,
+                "tick {}: engine {} model {}", t, got[0], want[0]);
         }
     }
 
@@ -367,6 +389,32 @@ fn low_pass_by_hand() {
     // x: 2, 4, 4, 0 → y: 2 (seed), 3, 3.5, 1.75.
     let s = [2, 4, 4, 0].map(|v| [v << 16, 0, 0, 0]);
     let want = [2.0, 3.0, 3.5, 1.75];
+    for (t, (got, _)) in run(&c, &s).into_iter().enumerate() {
+        assert!(
+            (got[0] - want[t]).abs() <= 2.0 * LSB,
+            "tick {t}: {}",
+            got[0]
+        );
+    }
+}
+
+/// The envelope by hand at α = ½: inputs 10, 0, 0, 20, 0 give 10, 5, 2.5, 20, 10 (up at
+/// once, down halfway each tick).
+#[test]
+fn envelope_by_hand() {
+    let rate = 1000.0f32;
+    let c = features_config(
+        rate,
+        vec![(
+            "env",
+            StageSpec::Envelope {
+                input: name("x"),
+                cutoff_hz: rate / (2.0 * std::f32::consts::PI),
+            },
+        )],
+    );
+    let s = [10, 0, 0, 20, 0].map(|v| [v << 16, 0, 0, 0]);
+    let want = [10.0, 5.0, 2.5, 20.0, 10.0];
     for (t, (got, _)) in run(&c, &s).into_iter().enumerate() {
         assert!(
             (got[0] - want[t]).abs() <= 2.0 * LSB,

@@ -304,6 +304,7 @@ pub fn model_series(config: &Config, samples: &[Vec<f64>]) -> Vec<Vec<f64>> {
 ///   samples it warms up over (each warm-up gain 1/n rounded down to 2⁻³¹, an error the
 ///   running mean carries n/2 times);
 /// - high-pass: twice the input's + the low-pass's own;
+/// - envelope: the input's + `LSB + 2⁻²⁰ max|x|` (up exactly, down as a warm low-pass);
 /// - mean: the input's + `LSB + N 2⁻²⁴ max|x|` (2²⁴/n rounded);
 /// - cancel: the input's + `2 LSB + |g| (δ_m + the low-pass's own) + 2⁻¹⁷ max|m|` (the
 ///   motion's low-pass times the gain, the gain rounded to 2⁻¹⁶);
@@ -335,6 +336,7 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
             StageSpec::HighPass { input, cutoff_hz } => {
                 2.0 * d(input) + low_pass(*cutoff_hz, m(input))
             }
+            StageSpec::Envelope { input, .. } => d(input) + LSB + m(input) / 1_048_576.0,
             StageSpec::Cancel {
                 input,
                 motion,
