@@ -238,11 +238,12 @@ impl Compiled {
                         "                if out.unjudgeable & {:#b} != 0 {{\n                    \
                          reset_event(state, {i});\n                }} else {{\n                    \
                          const LEVELS: [LevelParams; 2] = [{}, {}];\n                    \
-                         decide_event(state, {i}, &LEVELS, {}, out.confidences[{i}], now, out);\n                }}",
+                         decide_event(state, {i}, &LEVELS, {}, {:#b}, out.confidences[{i}], now, out);\n                }}",
                         1u32 << i,
                         alert.rust(),
                         confirm.rust(),
-                        e.onset_level
+                        e.onset_level,
+                        e.excluded_by
                     );
                 })
             },

@@ -51,6 +51,8 @@ pub struct Event {
     pub levels: [LevelParams; 2],
     /// Confidence (Q15) above which a rise counts as the event's onset.
     pub onset_level: u16,
+    /// The events (bit i: event i) whose confirm level, while up, holds this one's down.
+    pub excluded_by: EventMask,
 }
 
 /// A validated configuration in the detector's fixed-point form.
@@ -237,6 +239,7 @@ pub fn compile(config: &Config) -> Result<Compiled, ConfigError> {
     for (i, e) in config.events.iter().enumerate() {
         c.add_event(config, i, e)?;
     }
+    c.add_exclusions(config)?;
     c.add_phases(config)?;
     c.warn(config);
     Ok(c)
@@ -368,6 +371,7 @@ impl Compiled {
             sensor_channels: 0,
             levels,
             onset_level: onset_level(e, levels[0].on())?,
+            excluded_by: 0,
         };
         for t in &e.context {
             let item = Item::ContextTerm(e.name.clone(), t.feature.clone());
@@ -397,6 +401,28 @@ impl Compiled {
             return err(Item::Event(e.name.clone()), Problem::WeightSum(total));
         }
         self.events.push(event);
+        Ok(())
+    }
+
+    /// Each event's `excludes`, turned around: the events whose confirm level holds it down.
+    fn add_exclusions(&mut self, config: &Config) -> Result<(), ConfigError> {
+        for (i, e) in config.events.iter().enumerate() {
+            let item = || Item::Event(e.name.clone());
+            let mut seen: EventMask = 0;
+            for name in &e.excludes {
+                let Some(j) = config.events.iter().position(|o| &o.name == name) else {
+                    return err(item(), Problem::UnknownEvent(name.clone()));
+                };
+                if j == i {
+                    return err(item(), Problem::ExcludesItself);
+                }
+                if seen & (1 << j) != 0 {
+                    return err(item(), Problem::RepeatedEvent(name.clone()));
+                }
+                seen |= 1 << j;
+                self.events[j].excluded_by |= 1 << i;
+            }
+        }
         Ok(())
     }
 

@@ -129,6 +129,11 @@ pub struct EventSpec {
     /// first left zero.
     #[serde(default)]
     pub onset_level: f32,
+    /// Events this one excludes: while this event's confirm level is up, their levels are
+    /// held down, so that what follows a physical event (a struck finger's ringing, a
+    /// contact's stalled arm) is not reported as another. Default: none.
+    #[serde(default)]
+    pub excludes: Vec<String>,
 }
 
 /// A manipulation phase.
@@ -204,10 +209,12 @@ pub enum Problem {
     UnknownInput(String),
     /// A term names an undefined feature.
     UnknownFeature(String),
-    /// A phase names an undefined event.
+    /// A phase or an exclusion names an undefined event.
     UnknownEvent(String),
-    /// A phase lists the same event twice.
+    /// A phase or an exclusion lists the same event twice.
     RepeatedEvent(String),
+    /// An event excludes itself.
+    ExcludesItself,
     /// A feature's parameters.
     Stage(StageError),
     /// A confidence distribution function's parameters.
@@ -277,6 +284,7 @@ impl core::fmt::Display for Problem {
             Problem::UnknownFeature(n) => write!(f, "names feature '{n}', which is not defined"),
             Problem::UnknownEvent(n) => write!(f, "names event '{n}', which is not defined"),
             Problem::RepeatedEvent(n) => write!(f, "lists event '{n}' twice"),
+            Problem::ExcludesItself => write!(f, "excludes itself"),
             Problem::Stage(e) => write!(f, "{e}"),
             Problem::Cdf(e) => write!(f, "cdf: {e}"),
             Problem::Weight(w) => write!(f, "weight = {w} must be within [0, 1]"),

@@ -84,7 +84,7 @@ impl Compiled {
     }
 }
 
-/// One event: name, terms, levels, onset level.
+/// One event: name, terms, levels, onset level, the events that exclude it.
 fn write_event(w: &mut Bytes, e: &Event) {
     w.name(&e.name);
     w.count(e.context.len());
@@ -96,4 +96,5 @@ fn write_event(w: &mut Bytes, e: &Event) {
     }
     e.levels.iter().for_each(|l| l.write_image(w));
     w.u16(e.onset_level);
+    w.u8(e.excluded_by);
 }

@@ -73,6 +73,8 @@ struct Event {
     sensor_channels: ChannelMask,
     levels: [LevelParams; 2],
     onset_level: u16,
+    /// The events whose confirm level, while up, holds this one's down.
+    excluded_by: EventMask,
 }
 
 impl State {
@@ -250,16 +252,23 @@ impl Detector {
     }
 
     fn read_events(&mut self, r: &mut Reader<'_>) -> Result<(), ImageError> {
-        for i in 0..r.count(MAX_EVENTS, "event count")? {
+        let count = r.count(MAX_EVENTS, "event count")?;
+        for i in 0..count {
             let _ = self.event_names.push(r.name()?);
-            let e = self.read_event(r, 1 << i)?;
+            let e = self.read_event(r, 1 << i, count)?;
             let _ = self.events.push(e);
         }
         Ok(())
     }
 
-    /// One event's terms and levels; `bit` is its event mask bit.
-    fn read_event(&mut self, r: &mut Reader<'_>, bit: EventMask) -> Result<Event, ImageError> {
+    /// One event's terms and levels; `bit` is its event mask bit, `events` how many events
+    /// the image holds.
+    fn read_event(
+        &mut self,
+        r: &mut Reader<'_>,
+        bit: EventMask,
+        events: usize,
+    ) -> Result<Event, ImageError> {
         let psis = self.psis.len();
         let (mut context, mut context_channels) = (Vec::new(), 0);
         for _ in 0..r.count(MAX_TERMS, "context term count")? {
@@ -287,6 +296,11 @@ impl Detector {
         if onset_level >= levels[0].on {
             return Err(ImageError::Invalid("onset level"));
         }
+        let excluded_by = r.u8()?;
+        // Events that exist (the count is known before any event is read), not itself.
+        if u32::from(excluded_by) >> events != 0 || excluded_by & bit != 0 {
+            return Err(ImageError::Invalid("event exclusions"));
+        }
         Ok(Event {
             context,
             sensor,
@@ -294,6 +308,7 @@ impl Detector {
             sensor_channels,
             levels,
             onset_level,
+            excluded_by,
         })
     }
 
@@ -503,7 +518,16 @@ impl DetectorTick for Detector {
                 continue;
             }
             let c = out.confidences[i & (MAX_EVENTS - 1)];
-            decide_event(state, i, &e.levels, e.onset_level, c, now, out);
+            decide_event(
+                state,
+                i,
+                &e.levels,
+                e.onset_level,
+                e.excluded_by,
+                c,
+                now,
+                out,
+            );
         }
     }
 }

@@ -366,18 +366,28 @@ pub fn clear_psi(state: &mut State, k: usize) {
 }
 
 /// Decision levels and onset of event `i` at confidence `c`: tracks the onset, steps the
-/// alert and confirm levels, and reports them in `out`.
+/// alert and confirm levels, and reports them in `out`. While an event of `excluded_by`
+/// has its confirm level up (as it stands when this event is decided: this tick's for
+/// events decided before it, the last tick's for those after), both levels are held down.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn decide_event(
     state: &mut State,
     i: usize,
     levels: &[LevelParams; 2],
     onset_level: u16,
+    excluded_by: EventMask,
     c: Confidence,
     now: Tick,
     out: &mut Output,
 ) {
     let i = i & (MAX_EVENTS - 1);
+    let excluded = excluded_by != 0
+        && state
+            .events
+            .iter()
+            .enumerate()
+            .any(|(j, e)| excluded_by & (1 << j) != 0 && e.levels[1].up);
     let st = &mut state.events[i];
     let bit: EventMask = 1 << i;
     let q = c.to_bits();
@@ -388,8 +398,12 @@ pub fn decide_event(
         st.onset = now;
     }
     let [alert, confirm] = &mut st.levels;
-    let raised_alert = alert.step(&levels[0], q);
-    let raised_confirm = confirm.step(&levels[1], q);
+    if excluded {
+        *alert = LevelState::default();
+        *confirm = LevelState::default();
+    }
+    let raised_alert = !excluded && alert.step(&levels[0], q);
+    let raised_confirm = !excluded && confirm.step(&levels[1], q);
     out.alerting |= bit * EventMask::from(alert.up);
     out.confirmed |= bit * EventMask::from(confirm.up);
     let decision = |level| Decision {

@@ -45,7 +45,9 @@
 //!   for `hold` consecutive ticks (converted the same way from `hold_ms`). A raised
 //!   level reports the confidence, the tick and the onset: the first tick of the current
 //!   run of confidence strictly above `onset_level`. Switching to another phase lowers every
-//!   level and forgets onsets; only the active phase's events are evaluated.
+//!   level and forgets onsets; only the active phase's events are evaluated. While an event
+//!   that excludes another has its confirm level up (as it stands when the other is decided,
+//!   in event order), the other's levels are held down.
 
 use detector_build::Config;
 use detector_core::{CdfSpec, Level, StageSpec, Window};
@@ -244,6 +246,8 @@ struct Event {
     sensor: Vec<Term>,
     levels: [LevelParams; 2],
     onset_level: f64,
+    /// The events whose confirm level, while up, holds this one's levels down.
+    excluded_by: u8,
 }
 
 /// The reference model of one configuration (immutable); its running state is a
@@ -498,7 +502,18 @@ impl Model {
                 sensor,
                 levels: [level(&e.alert), level(&e.confirm)],
                 onset_level: f64::from(e.onset_level),
+                excluded_by: 0,
             });
+        }
+        for (i, e) in config.events.iter().enumerate() {
+            for name in &e.excludes {
+                let j = config
+                    .events
+                    .iter()
+                    .position(|o| o.name == *name)
+                    .ok_or_else(|| ModelError(name.clone()))?;
+                events[j].excluded_by |= 1 << i;
+            }
         }
         let mut phases = Vec::new();
         for p in &config.phases {
@@ -688,11 +703,17 @@ impl Model {
         unjudgeable: u8,
     ) -> Decided {
         let mut d = Decided::default();
-        for (i, (e, st)) in self.events.iter().zip(state.events.iter_mut()).enumerate() {
+        for (i, e) in self.events.iter().enumerate() {
             let bit = 1u8 << i;
             if evaluated & bit == 0 {
                 continue;
             }
+            let excluded = state
+                .events
+                .iter()
+                .enumerate()
+                .any(|(j, other)| e.excluded_by & (1 << j) != 0 && other.levels[1].up);
+            let st = &mut state.events[i];
             let judged = unjudgeable & bit == 0;
             let c = if judged {
                 confidences.get(i).copied().unwrap_or(0.0)
@@ -705,7 +726,7 @@ impl Model {
                 st.onset = None;
             }
             for (k, (p, l)) in e.levels.iter().zip(st.levels.iter_mut()).enumerate() {
-                if !judged {
+                if !judged || excluded {
                     *l = LevelState::default();
                     continue;
                 }

@@ -285,6 +285,40 @@ fn a_phase_naming_an_undefined_event() {
     assert_eq!(e.problem, Problem::RepeatedEvent(name("e")));
 }
 
+/// An exclusion names an event that exists, not the event itself, each once.
+#[test]
+fn an_exclusion_naming_a_bad_event() {
+    for (excludes, words, problem) in [
+        (
+            vec!["ghost"],
+            vec!["event 'e'", "'ghost'"],
+            Problem::UnknownEvent(name("ghost")),
+        ),
+        (
+            vec!["e"],
+            vec!["event 'e'", "excludes itself"],
+            Problem::ExcludesItself,
+        ),
+    ] {
+        let e = reject(
+            |c| c.events[0].excludes = excludes.iter().map(|n| name(n)).collect(),
+            &words,
+        );
+        assert_eq!(e.item, Item::Event(name("e")));
+        assert_eq!(e.problem, problem);
+    }
+    let mut two = good();
+    let mut other = two.events[0].clone();
+    other.name = name("f");
+    two.events.push(other);
+    two.phases[0] = phase("p", &["e", "f"]);
+    two.events[0].excludes = vec![name("f"), name("f")];
+    let e = detector_build::build(&two).expect_err("repeated");
+    assert_eq!(e.problem, Problem::RepeatedEvent(name("f")));
+    two.events[0].excludes = vec![name("f")];
+    assert!(detector_build::build(&two).is_ok());
+}
+
 #[test]
 fn a_window_longer_than_supported() {
     let ste = |window| StageSpec::Ste {

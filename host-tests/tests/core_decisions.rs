@@ -422,3 +422,52 @@ fn faults_follow_feature_chains() {
     let e = det.event("e").expect("event");
     assert_eq!(det.event_channels(e), 0b101);
 }
+
+/// `a` excludes `b`: while `a`'s confirm level is up, `b`'s levels are held down whatever its
+/// confidence; once `a`'s level has fallen (its confidence below `off` for the 2 ms hold),
+/// `b` is raised at once. Without the exclusion `b` is raised as soon as it is confident.
+#[test]
+fn an_exclusion_holds_the_excluded_event_down_while_the_other_is_confirmed() {
+    let s = sigmoid(0.0, 1.0);
+    let make = |exclude: bool| {
+        let mut a = event("a", vec![], vec![sensor("fx", 1.0, s)]);
+        let mut b = event("b", vec![], vec![sensor("fy", 1.0, s)]);
+        for e in [&mut a, &mut b] {
+            e.confirm = level(0.75, 0.5, 0.0);
+            e.confirm.hold_ms = 2.0;
+        }
+        if exclude {
+            a.excludes = vec!["b".into()];
+        }
+        config(
+            1000.0,
+            &["x", "y"],
+            vec![("fx", raw("x")), ("fy", raw("y"))],
+            vec![a, b],
+            vec![phase("p", &["a", "b"])],
+        )
+    };
+    let xs = [0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0];
+    let ys = [0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    let confirmations = |c: &Config| {
+        let det = detector_build::build(c).expect("valid");
+        let model = Model::new(c).expect("resolves");
+        let (mut st, mut ms) = (det.new_state(), model.new_state());
+        let mut got = Vec::new();
+        for (t, (&x, &y)) in xs.iter().zip(&ys).enumerate() {
+            let o = det.tick(&mut st, t as u32, &inputs_f64(&[x, y], 0));
+            let m = model.tick(&mut ms, t as u32, &[x, y], 0);
+            assert_eq!(o.confirmed, m.decided.confirmed, "confirmed at tick {t}");
+            assert_eq!(o.alerting, m.decided.alerting, "alerting at tick {t}");
+            got.extend(
+                o.decisions
+                    .iter()
+                    .filter(|d| d.level == Level::Confirm)
+                    .map(|d| (d.tick, d.event.0)),
+            );
+        }
+        got
+    };
+    assert_eq!(confirmations(&make(false)), [(1, 0), (2, 1)]);
+    assert_eq!(confirmations(&make(true)), [(1, 0), (5, 1)]);
+}

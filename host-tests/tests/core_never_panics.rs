@@ -304,6 +304,13 @@ fn any_config() -> impl Strategy<Value = Config> {
                     alert: e.alert,
                     confirm: e.confirm,
                     onset_level: e.onset_level,
+                    // Every other event excludes the first, so that exclusions run too.
+                    excludes: c
+                        .events
+                        .first()
+                        .filter(|_| i % 2 == 1)
+                        .map(|first| vec![first.name.clone()])
+                        .unwrap_or_default(),
                 };
                 for (r, cdf) in e.context {
                     let feature = resolve(&r, &features, "f0");

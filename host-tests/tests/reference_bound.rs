@@ -515,6 +515,13 @@ fn realize(plan: &Plan) -> (Config, Vec<Step>, Vec<f64>) {
             dwell(ep.dwells[1]),
         );
         e.onset_level = q15(onset, 0, alert_on_bits - 1);
+        // Half the events exclude some others (bits of the second dwell's byte).
+        if ep.dwells[0] >= 128 {
+            e.excludes = (0..plan.events.len())
+                .filter(|&j| j != i && (ep.dwells[1] >> (j % 8)) & 1 == 1)
+                .map(|j| event_names[j].clone())
+                .collect();
+        }
         events.push(e);
     }
     let phases: Vec<_> = plan

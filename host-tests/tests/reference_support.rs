@@ -49,6 +49,7 @@ pub fn event(event_name: &str, ctx: Vec<ContextTerm>, sen: Vec<SensorTerm>) -> E
         alert: level(0.5, 0.25, 0.0),
         confirm: level(0.75, 0.5, 0.0),
         onset_level: 0.0,
+        excludes: Vec::new(),
     };
     for c in ctx {
         e.context.push(c);
