@@ -785,7 +785,7 @@ fn fit_writes_a_configuration_that_runs() {
     let corpus = dir.join("corpus");
     std::fs::create_dir_all(&corpus).expect("corpus dir");
     for scenario in ["contact_hard_8", "disturbance_large_5"] {
-        for seed in 1..=4 {
+        for seed in 9..=12 {
             let path = corpus.join(format!("{scenario}_{seed}.csv"));
             let out = fingertip(&[
                 "simulate",
