@@ -48,6 +48,7 @@ use super::params::{Plant, Sensors};
 use super::trajectory::Trajectory;
 use super::{CHANNELS, MIN_INTERNAL_RATE_HZ};
 use rand::{Rng, RngExt};
+use rand_distr::StandardNormal;
 use std::collections::VecDeque;
 use std::f64::consts::{PI, TAU};
 
@@ -228,6 +229,8 @@ pub(crate) fn required_rate(
 /// The ADC of one analog channel.
 struct Adc {
     lsb: f64,
+    /// 1 / lsb.
+    per_lsb: f64,
     gain: f64,
     offset: f64,
     drift: f64,
@@ -252,6 +255,7 @@ impl Adc {
         let hum = s.hum_lsb * lsb;
         Adc {
             lsb,
+            per_lsb: 1.0 / lsb,
             gain,
             offset,
             drift,
@@ -275,7 +279,7 @@ impl Adc {
         }
         let y = self.gain * v + self.offset + self.drift * t + hum + self.sigma * z;
         // Adding zero turns a negative zero into a positive one.
-        round(y / self.lsb).clamp(-2048.0, 2047.0) * self.lsb + 0.0
+        round(y * self.per_lsb).clamp(-2048.0, 2047.0) * self.lsb + 0.0
     }
 }
 
@@ -285,30 +289,6 @@ impl Adc {
 fn round(x: f64) -> f64 {
     const SHIFT: f64 = 6_755_399_441_055_744.0; // 1.5 x 2^52
     (x + SHIFT) - SHIFT
-}
-
-/// Standard normal deviates by Marsaglia's polar method (two per accepted pair).
-struct Gauss {
-    spare: Option<f64>,
-}
-
-impl Gauss {
-    fn next<R: Rng>(&mut self, rng: &mut R) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return z;
-        }
-        loop {
-            let u = 2.0 * rng.random::<f64>() - 1.0;
-            let v = 2.0 * rng.random::<f64>() - 1.0;
-            let q = u * u + v * v;
-            // Accepts about 79 % of pairs; q > 0 keeps the logarithm finite.
-            if q > 0.0 && q < 1.0 {
-                let k = (-2.0 * q.ln() / q).sqrt();
-                self.spare = Some(v * k);
-                return u * k;
-            }
-        }
-    }
 }
 
 /// A unit phasor `(cos, sin)` turned by a fixed step at each [`Phasor::rotate`].
@@ -339,9 +319,10 @@ impl Phasor {
         (self.cos, self.sin) = (self.cos * dc - self.sin * ds, self.sin * dc + self.cos * ds);
     }
 
-    /// Brings the magnitude back to one (rounding makes it wander).
+    /// Brings the magnitude back to one (rounding makes it wander; the magnitude stays far
+    /// from overflow, so no `hypot`).
     fn normalize(&mut self) {
-        let norm = self.cos.hypot(self.sin);
+        let norm = (self.cos * self.cos + self.sin * self.sin).sqrt();
         self.cos /= norm;
         self.sin /= norm;
     }
@@ -362,7 +343,7 @@ struct DriveRipple {
 impl DriveRipple {
     /// Follows the commanded velocity `v` (at a joint-loop tick).
     fn follow(&mut self, v: [f64; 2]) {
-        let speed = v[0].hypot(v[1]);
+        let speed = (v[0] * v[0] + v[1] * v[1]).sqrt();
         if speed > 1e-9 && self.amplitude > 0.0 {
             self.direction = [v[0] / speed, v[1] / speed];
             let step_angle = TAU * speed * self.dt / self.pitch;
@@ -414,7 +395,8 @@ struct Chain {
     /// Stiffness and damping of the distal structure's bending (link 1 to link 2).
     link: (f64, f64),
     /// Stiffness and damping of the foam, normal (x) and shear (y).
-    foam: [(f64, f64); 2],
+    foam_k: [f64; 2],
+    foam_c: [f64; 2],
     coulomb: f64,
     viscous: f64,
 }
@@ -426,7 +408,7 @@ impl Chain {
         let ms = p.skin_mass;
         let m_tip = md + ms;
         let m_tot = ma + m_tip;
-        let foam = |k: f64| (k, 2.0 * p.foam_damping_ratio * (k * ms).sqrt());
+        let foam_k = [p.foam_stiffness, p.foam_stiffness * p.foam_shear_ratio];
         // The bending mode: link 1 against link 2, fingertip and skin.
         let mu = ma * m_tip / m_tot;
         let wl = TAU * p.link_frequency;
@@ -436,10 +418,8 @@ impl Chain {
             skin_mass: ms,
             total_mass: m_tot,
             link: (mu * wl * wl, 2.0 * p.link_damping_ratio * mu * wl),
-            foam: [
-                foam(p.foam_stiffness),
-                foam(p.foam_stiffness * p.foam_shear_ratio),
-            ],
+            foam_k,
+            foam_c: foam_k.map(|k| 2.0 * p.foam_damping_ratio * (k * ms).sqrt()),
             coulomb: p.arm_coulomb_friction,
             viscous: p.arm_viscous_friction,
         }
@@ -533,7 +513,7 @@ struct ContextLink {
     /// Messages sent and not yet received: the step they arrive at, and their values.
     in_flight: VecDeque<(u64, [f64; 6])>,
     /// What the fingertip last received: position error, commanded velocity and
-    /// acceleration (x, y).
+    /// acceleration (x, y), as sent (rounded to 1e-9 of their unit).
     received: [f64; 6],
 }
 
@@ -565,7 +545,7 @@ impl ContextLink {
             if arrives > i {
                 break;
             }
-            self.received = values;
+            self.received = values.map(round_context);
             self.in_flight.pop_front();
         }
     }
@@ -834,7 +814,6 @@ struct SensorChain {
     highpass: HighPass1,
     anti_alias: AntiAliasFilter<4>,
     adc: [Adc; 4],
-    gauss: Gauss,
     /// The mains phase, advanced once per output sample.
     mains: Phasor,
     /// The pressing force and the foam's x force at the previous step.
@@ -882,7 +861,6 @@ impl SensorChain {
             highpass: HighPass1::new(s.accel_highpass, internal_rate),
             anti_alias: AntiAliasFilter::new(internal_rate, rate_hz),
             adc,
-            gauss: Gauss { spare: None },
             mains: Phasor::new(0.0, TAU * s.hum_frequency / rate_hz),
             previous: (0.0, 0.0),
             until_sample: 0,
@@ -931,7 +909,7 @@ impl SensorChain {
         let mains = [(c, s), (c2, s2), (c * c2 - s * s2, s * c2 + c * s2)];
         let mut readings = [0.0; 4];
         for ((r, adc), y) in readings.iter_mut().zip(&self.adc).zip(filtered) {
-            let z = self.gauss.next(noise);
+            let z: f64 = noise.sample(StandardNormal);
             *r = adc.convert(y, ts, &mains, z);
         }
         self.mains.rotate();
@@ -979,7 +957,9 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         vs: c0.v,
     };
     // The motion was steady before time zero: the fingertip holds the message of then.
-    context.received = context.message(0, &mut setup.trajectory, &b);
+    context.received = context
+        .message(0, &mut setup.trajectory, &b)
+        .map(round_context);
     let mut contact = setup.object.as_ref().map(|o| Contact::new(o, b.xs, dt));
     let obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
         setup: o,
@@ -993,7 +973,12 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         phasor: Phasor::new(0.0, 0.0),
         direction: [0.0; 2],
     };
-    let (ma, md, ms) = (chain.arm_mass, chain.distal_mass, chain.skin_mass);
+    let (inv_ma, inv_md, ms) = (
+        1.0 / chain.arm_mass,
+        1.0 / chain.distal_mass,
+        chain.skin_mass,
+    );
+    let inv_ms = 1.0 / ms;
     let carrier = p.carrier_mass;
 
     let mut onset: Option<(u64, Happened)> = None;
@@ -1002,37 +987,54 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         .collect();
     let total_steps = (setup.rows.saturating_sub(1) * n_over) as u64;
 
-    for i in 0..=total_steps {
+    // An exclusive range: an inclusive one checks its end twice per step.
+    for i in 0..total_steps + 1 {
         let t = i as f64 * dt;
         controller.update(i, &mut setup.trajectory, &b, &mut ripple);
         context.update(i, &mut setup.trajectory, &b);
         let ripple_force = ripple.force();
-        let (f_d, struck) = disturbance
-            .as_mut()
-            .map_or(([0.0; 2], Struck::Link2), |d| (d.force(t), d.body));
-        let on = |body: Struck, k: usize| if struck == body { f_d[k] } else { 0.0 };
-        let f_ob = obstacle.as_ref().map_or(0.0, |o| o.force(&b));
-        let ob = |body: Struck| match obstacle.as_ref() {
-            Some(o) if o.setup.body == body => f_ob,
-            _ => 0.0,
+        // The outside forces on each body, x and y: the disturbance on the body it strikes,
+        // the obstacle along x.
+        let mut on_arm = [0.0; 2];
+        let mut on_distal = [0.0; 2];
+        let mut on_tip = [0.0; 2];
+        let f_d = match disturbance.as_mut() {
+            Some(d) => {
+                let f = d.force(t);
+                match d.body {
+                    Struck::Link1 => on_arm = f,
+                    Struck::Link2 => on_distal = f,
+                    Struck::Tip => on_tip = f,
+                }
+                f
+            }
+            None => [0.0; 2],
+        };
+        let f_ob = match obstacle.as_ref() {
+            Some(o) => {
+                let f = o.force(&b);
+                match o.setup.body {
+                    Struck::Link1 => on_arm[0] -= f,
+                    _ => on_distal[0] -= f,
+                }
+                f
+            }
+            None => 0.0,
         };
 
-        let mut a_arm = [0.0; 2];
-        let mut a_d = [0.0; 2];
-        let mut foam = [0.0; 2];
-        for k in 0..2 {
-            let link = chain.link.0 * (b.xa[k] - b.xd[k]) + chain.link.1 * (b.va[k] - b.vd[k]);
-            foam[k] = chain.foam[k].0 * (b.xd[k] - b.xs[k]) + chain.foam[k].1 * (b.vd[k] - b.vs[k]);
+        // Both axes at once, the same arithmetic lane by lane.
+        let (kl, cl) = chain.link;
+        let link: [f64; 2] =
+            std::array::from_fn(|k| kl * (b.xa[k] - b.xd[k]) + cl * (b.va[k] - b.vd[k]));
+        let foam: [f64; 2] = std::array::from_fn(|k| {
+            chain.foam_k[k] * (b.xd[k] - b.xs[k]) + chain.foam_c[k] * (b.vd[k] - b.vs[k])
+        });
+        let a_arm: [f64; 2] = std::array::from_fn(|k| {
             let drive = controller.force[k] + ripple_force[k] - chain.friction(b.va[k]);
-            // Obstacles push back along x only.
-            let (ob1, ob2) = if k == 0 {
-                (ob(Struck::Link1), ob(Struck::Link2))
-            } else {
-                (0.0, 0.0)
-            };
-            a_arm[k] = (drive - link - ob1 + on(Struck::Link1, k)) / ma;
-            a_d[k] = (link - foam[k] - ob2 + on(Struck::Link2, k) + on(Struck::Tip, k)) / md;
-        }
+            (drive - link[k] + on_arm[k]) * inv_ma
+        });
+        let a_d: [f64; 2] =
+            std::array::from_fn(|k| (link[k] - foam[k] + on_distal[k] + on_tip[k]) * inv_md);
         // The skin: foam and friction explicit, the contact's normal force implicit in its
         // damping.
         let (f_n, f_t, n, tn) = match contact.as_mut() {
@@ -1043,13 +1045,13 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
             }
             None => (0.0, 0.0, [1.0, 0.0], [0.0, 1.0]),
         };
-        let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) / ms);
+        let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) * inv_ms);
         if onset.is_none() {
             onset = event(f_n, f_ob, f_d).map(|h| (i, h));
         }
 
         let physical = Physical {
-            load: std::array::from_fn(|k| -carrier * a_d[k] - foam[k] + on(Struck::Tip, k)),
+            load: std::array::from_fn(|k| -carrier * a_d[k] - foam[k] + on_tip[k]),
             skin: a_s,
             pressing: f_n * n[0] - f_t * tn[0],
             foam: foam[0],
@@ -1060,7 +1062,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
                 column.push(v);
             }
             for (column, v) in out[4..].iter_mut().zip(context.received) {
-                column.push(round_context(v));
+                column.push(v);
             }
         }
 
@@ -1085,7 +1087,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
 /// Context values are sent with a resolution of 1e-9 of their unit (they are the
 /// controller's own numbers; this only drops floating-point dust such as 1e-20 m).
 fn round_context(v: f64) -> f64 {
-    (v * 1e9).round() / 1e9 + 0.0
+    round(v * 1e9) / 1e9 + 0.0
 }
 
 #[cfg(test)]
@@ -1300,6 +1302,7 @@ mod tests {
         // A second harmonic of the mains: sin(2 theta + phase).
         let adc = Adc {
             lsb: 1e-3,
+            per_lsb: 1e3,
             gain: 1.0,
             offset: 0.0,
             drift: 0.0,
