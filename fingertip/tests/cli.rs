@@ -94,6 +94,7 @@ fn nominal_table1_runs_detect_the_right_event() {
 fn evaluate_writes_the_documented_report() {
     let dir = scratch("evaluate");
     let json = dir.join("report.json");
+    let figure = dir.join("bins.png");
     let out = fingertip(&[
         "evaluate",
         "--runs",
@@ -102,6 +103,8 @@ fn evaluate_writes_the_documented_report() {
         "0.005",
         "--json",
         json.to_str().expect("utf-8"),
+        "--plot-bins",
+        figure.to_str().expect("utf-8"),
     ]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stdout = text(&out.stdout);
@@ -123,7 +126,29 @@ fn evaluate_writes_the_documented_report() {
             );
         }
         assert_eq!(s["runs"], 2);
+        // Per bin of the parameter that matters most: every run in one bin, tallied alike.
+        assert!(
+            s["binned_by"].as_str().is_some_and(|b| !b.is_empty()),
+            "{s}"
+        );
+        let bins = s["bins"].as_array().expect("bins");
+        assert!(bins.len() >= 2, "{s}");
+        let sum = |key: &str| {
+            bins.iter()
+                .map(|b| b[key].as_u64().expect(key))
+                .sum::<u64>()
+        };
+        for key in ["runs", "correct", "wrong", "missed", "repeated"] {
+            assert_eq!(sum(key), s[key].as_u64().expect(key), "{key} in {s}");
+        }
+        let first = bins[0]["name"].as_str().expect("bin name");
+        assert!(
+            stdout.contains(&format!("  {first} ")),
+            "{first} in {stdout}"
+        );
     }
+    let png = std::fs::read(&figure).expect("the figure is written");
+    assert!(png.starts_with(b"\x89PNG"), "a PNG");
     assert!(report["false_alarms_per_hour"].is_number());
     assert!(report["free_motion_hours"].as_f64().expect("hours") >= 0.005);
 }

@@ -395,6 +395,191 @@ impl Scenario {
     }
 }
 
+/// How `fingertip evaluate` splits a scenario's runs into bins of the parameter that
+/// matters most for detecting its event, so that a weak region shows instead of averaging
+/// away.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Binning {
+    /// The parameter each run is placed by (and plotted against), e.g. `object stiffness`.
+    pub parameter: &'static str,
+    /// Its unit.
+    pub unit: &'static str,
+    /// Whether it spans decades (log bins and a log axis).
+    pub log: bool,
+    /// The bins.
+    pub split: Split,
+}
+
+/// The bins of a [`Binning`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Split {
+    /// Ranges of the parameter between consecutive edges (ascending, in its unit); a value
+    /// beyond the outer edges counts in the outer bin.
+    Edges(&'static [f64]),
+    /// Kinds of run named in the trace's metadata (struck link, tap or burst and the body
+    /// struck), in this order.
+    Categories(&'static [&'static str]),
+}
+
+/// Where one run falls in its scenario's [`Binning`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunBin {
+    /// Its bin, an index into [`Binning::labels`].
+    pub bin: usize,
+    /// Its value of the binning parameter (in the binning's unit).
+    pub value: f64,
+}
+
+impl Binning {
+    /// Each bin's label: a range such as `1e+04-2.2e+04 N/m`, or a category.
+    pub fn labels(&self) -> Vec<String> {
+        match self.split {
+            Split::Edges(edges) => edges
+                .windows(2)
+                .map(|w| format!("{}-{} {}", short(w[0]), short(w[1]), self.unit))
+                .collect(),
+            Split::Categories(names) => names.iter().map(|n| n.to_string()).collect(),
+        }
+    }
+}
+
+/// Two significant digits, in scientific notation from 10,000 on.
+fn short(v: f64) -> String {
+    if v.abs() >= 1e4 {
+        format!("{v:.1e}")
+    } else if v.abs() >= 10.0 || v == v.round() {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+const STIFFNESS: &str = "object stiffness";
+const PEAK: &str = "peak force";
+const DISTURBANCE_CATEGORIES: &[&str] = &[
+    "tap on tip",
+    "tap on link2",
+    "tap on link1",
+    "burst on tip",
+    "burst on link2",
+    "burst on link1",
+];
+
+impl Scenario {
+    /// The parameter that matters most for detecting this scenario's event and its bins:
+    /// object stiffness for contacts (mass for a movable object), the struck link for
+    /// collisions (plotted against speed), tap or burst and the body struck for
+    /// disturbances (size and kind at 2 cm/s, kind for knocks; plotted against the peak
+    /// force), the acceleration for sudden accelerations. `None` for free motion.
+    pub fn binning(self) -> Option<Binning> {
+        let edges = |parameter, unit, log, edges| Binning {
+            parameter,
+            unit,
+            log,
+            split: Split::Edges(edges),
+        };
+        let categories = |parameter, unit, log, names| Binning {
+            parameter,
+            unit,
+            log,
+            split: Split::Categories(names),
+        };
+        Some(match self.kind() {
+            Kind::Contact(ObjectKind::Hard) => {
+                edges(STIFFNESS, "N/m", true, &[1e4, 2.15e4, 4.64e4, 1e5])
+            }
+            Kind::Contact(ObjectKind::Soft | ObjectKind::FirmSoft) => {
+                edges(STIFFNESS, "N/m", true, &[100.0, 300.0, 1000.0, 3000.0])
+            }
+            Kind::Contact(ObjectKind::VerySoft) => {
+                edges(STIFFNESS, "N/m", true, &[40.0, 70.0, 120.0])
+            }
+            Kind::Contact(ObjectKind::Movable) => {
+                edges("object mass", "kg", true, &[0.05, 0.1, 0.2, 0.5])
+            }
+            Kind::BrakingContact => edges(STIFFNESS, "N/m", true, &[1e3, 3e3, 3.16e4, 1e5]),
+            Kind::Collision => categories("speed", "m/s", false, &["link1", "link2"]),
+            Kind::Disturbance(Size::Either) => categories(
+                PEAK,
+                "N",
+                true,
+                &["large tap", "large burst", "small tap", "small burst"],
+            ),
+            Kind::Disturbance(_) => categories(PEAK, "N", true, DISTURBANCE_CATEGORIES),
+            Kind::Knock(_) => categories(PEAK, "N", true, &["tap", "burst"]),
+            Kind::SuddenAccel => edges(
+                "commanded acceleration",
+                "m/s^2",
+                false,
+                &[8.0, 13.0, 19.0, 25.0],
+            ),
+            Kind::Free => return None,
+        })
+    }
+
+    /// Where a run of this scenario falls in its [`Binning`], from the trace's metadata;
+    /// `None` when the trace lacks what it needs (not this simulator's, or free motion).
+    pub fn run_bin(self, trace: &Trace) -> Option<RunBin> {
+        let binning = self.binning()?;
+        let param =
+            |key: &str| -> Option<f64> { trace.meta(&format!("param.{key}"))?.parse().ok() };
+        let tap = || trace.meta("disturbance_kind").map(|k| k == "impulse");
+        // The peak force of the disturbance or knock, from its group's tap or burst fields.
+        let peak = |group: &str| -> Option<f64> {
+            let field = if tap()? {
+                "peak"
+            } else {
+                "vibration_amplitude"
+            };
+            let field = match (group, field) {
+                ("knock", f) => f.to_string(),
+                (_, "peak") => "impulse_peak".to_string(),
+                (_, f) => f.to_string(),
+            };
+            param(&format!("{group}.{field}"))
+        };
+        let size = || match self.kind() {
+            Kind::Disturbance(Size::Large) => Some("large"),
+            Kind::Disturbance(Size::Small) => Some("small"),
+            _ => trace.meta("disturbance_size"),
+        };
+        let value = match self.kind() {
+            Kind::Contact(ObjectKind::Hard) => param("hard_object.stiffness"),
+            Kind::Contact(ObjectKind::Soft) => param("soft_object.stiffness"),
+            Kind::Contact(ObjectKind::FirmSoft) => param("firm_soft_object.stiffness"),
+            Kind::Contact(ObjectKind::VerySoft) => param("very_soft_object.stiffness"),
+            Kind::Contact(ObjectKind::Movable) => param("movable_object.mass"),
+            Kind::BrakingContact => {
+                param("hard_object.stiffness").or_else(|| param("firm_soft_object.stiffness"))
+            }
+            Kind::Collision => param("motion.speed_factor").map(|f| f * self.nominal_speed()),
+            Kind::Disturbance(_) => peak(&format!("{}_disturbance", size()?)),
+            Kind::Knock(_) => peak("knock"),
+            Kind::SuddenAccel => param("sudden_accel.amplitude"),
+            Kind::Free => None,
+        }?;
+        let bin = match binning.split {
+            Split::Edges(edges) => edges[1..edges.len() - 1]
+                .iter()
+                .take_while(|&&e| value >= e)
+                .count(),
+            Split::Categories(names) => {
+                let kind = || tap().map(|t| if t { "tap" } else { "burst" });
+                let name = match self.kind() {
+                    Kind::Collision => trace.meta("struck_link")?.to_string(),
+                    Kind::Disturbance(Size::Either) => format!("{} {}", size()?, kind()?),
+                    Kind::Disturbance(_) => {
+                        format!("{} on {}", kind()?, trace.meta("disturbance_body")?)
+                    }
+                    _ => kind()?.to_string(),
+                };
+                names.iter().position(|n| *n == name)?
+            }
+        };
+        Some(RunBin { bin, value })
+    }
+}
+
 impl fmt::Display for Scenario {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
