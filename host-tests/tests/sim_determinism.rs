@@ -12,7 +12,7 @@ fn opts(seed: u64, randomize: bool) -> SimOptions {
 
 #[test]
 fn same_seed_same_trace() {
-    for s in Scenario::table1() {
+    for s in Scenario::single_event() {
         for randomize in [false, true] {
             let a = sim::simulate(s, &opts(42, randomize)).unwrap();
             let b = sim::simulate(s, &opts(42, randomize)).unwrap();

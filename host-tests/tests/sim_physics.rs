@@ -683,3 +683,56 @@ fn free_motion_changes_velocity_gently_while_moving() {
     assert!(sudden > 0, "{sudden}");
     assert!(max_abs(vx) <= 0.1 + 1e-9 && max_abs(vy) <= 0.1 + 1e-9);
 }
+
+/// The fingertip's suspension: after a sudden acceleration from standstill, a padded tip on
+/// soft foam rings at sqrt(foam stiffness / skin mass) / 2 pi (20 to 80 Hz), and the force
+/// sensor, which carries the foam's force, shows it: the strongest frequency of its
+/// reading over the next 150 ms, from 10 Hz to below the bending mode, is that mode's.
+#[test]
+fn padded_tip_rings_at_its_suspension_mode() {
+    let mut checked = 0;
+    for seed in 1..=15 * SEEDS {
+        let tr = run(Scenario::SuddenAccelStandstill, seed, true);
+        let p = |k: &str| param(&tr, k);
+        let mode =
+            (p("plant.foam_stiffness") / p("plant.skin_mass")).sqrt() / std::f64::consts::TAU;
+        // Well apart from the bending mode and from the position loop (whose bandwidth, up
+        // to 50 Hz, couples with a mode near it and pulls it).
+        // And a quiet mains: its hum (up to 3 LSB, 29 mN, at 50 Hz and its harmonics) would
+        // outlast the mode's decay.
+        if !(20.0..=80.0).contains(&mode)
+            || p("plant.link_frequency") < 3.0 * mode
+            || p("plant.control_bandwidth") > 0.5 * mode
+            || p("sensors.hum_lsb") > 0.75
+        {
+            continue;
+        }
+        checked += 1;
+        let f = col(&tr, "force_x");
+        let step: f64 = tr.meta("command_onset_s").unwrap().parse().unwrap();
+        let end = (step * 5000.0).round() as usize + 5 * MS;
+        let window = &f[end..(end + 150 * MS).min(f.len())];
+        let m = mean(window);
+        // A scan of the spectrum (a DFT at each frequency), 0.5 Hz apart.
+        let power = |hz: f64| {
+            let (mut c, mut s) = (0.0, 0.0);
+            for (k, x) in window.iter().enumerate() {
+                let phase = std::f64::consts::TAU * hz * k as f64 / 5000.0;
+                c += (x - m) * phase.cos();
+                s += (x - m) * phase.sin();
+            }
+            c * c + s * s
+        };
+        // Below the bending mode, which rings on the sensor too.
+        let top = (0.6 * p("plant.link_frequency")).min(150.0);
+        let strongest = (20..(2.0 * top) as usize)
+            .map(|k| k as f64 * 0.5)
+            .max_by(|a, b| power(*a).total_cmp(&power(*b)))
+            .unwrap_or(0.0);
+        assert!(
+            (strongest - mode).abs() < 0.2 * mode,
+            "seed {seed}: strongest at {strongest} Hz, the suspension at {mode} Hz"
+        );
+    }
+    assert!(checked >= 5, "{checked} padded tips");
+}
