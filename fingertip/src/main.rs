@@ -150,7 +150,9 @@ enum Command {
         /// Randomized runs per scenario.
         #[arg(long, default_value_t = 1000)]
         runs: usize,
-        /// Base seed; run k of a scenario uses a seed derived from it.
+        /// Base seed; run k of a scenario uses a seed derived from it, so that two base
+        /// seeds draw disjoint runs: tune a configuration on one (say 100) and report it on
+        /// another (the default, 1).
         #[arg(long, default_value_t = 1)]
         seed: u64,
         /// Score labelled recordings instead of simulated runs: trace files, or directories
@@ -172,6 +174,11 @@ enum Command {
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
+        /// Also plot, per scenario, each run's peak confidence of its expected event (the
+        /// highest of any event where none is expected) against the parameter its runs are
+        /// binned by, coloured by outcome (.png or .svg; the first configuration's).
+        #[arg(long, conflicts_with = "traces")]
+        plot_bins: Option<PathBuf>,
     },
     /// Each feature's values in labelled events and outside them, from recordings: how
     /// well one threshold on it tells each event from the rest, and a figure.
@@ -379,8 +386,15 @@ fn run(cli: Cli) -> Result<()> {
             config,
             free_hours,
             json,
+            plot_bins,
             ..
-        } => evaluate(runs, seed, &config, free_hours, json.as_deref()),
+        } => evaluate(
+            runs,
+            seed,
+            &config,
+            free_hours,
+            (json.as_deref(), plot_bins.as_deref()),
+        ),
         Command::Features {
             traces,
             config,
@@ -1039,6 +1053,11 @@ struct JobResult {
     seed: u64,
     /// One per detector, in `--config` order.
     outcomes: Vec<Outcome>,
+    /// Per detector, the run's peak confidence of its expected event from its onset on
+    /// (of any event all run long where none is expected), in [0, 1].
+    peaks: Vec<f64>,
+    /// Where the run falls in its scenario's binning.
+    bin: Option<sim::RunBin>,
     /// Simulated time (s).
     seconds: f64,
 }
@@ -1058,17 +1077,31 @@ fn run_job(detectors: &[Detector], job: Job, base_seed: u64) -> Result<JobResult
     let expected = scenario
         .expected()
         .map(|e| (e, truth.as_ref().map_or(0.0, |t| t.1)));
-    let outcomes = detectors
+    let from_row = trace.truth_onset().map_or(0, |(row, _)| row);
+    let (outcomes, peaks) = detectors
         .iter()
         .map(|d| {
-            let decisions = replay::replay(d, &trace, |_, _, _| {})?;
-            Ok(score::classify(expected, &decisions))
+            let watched = scenario.expected().and_then(|e| d.event(e));
+            let mut peak: f64 = 0.0;
+            let decisions = replay::replay(d, &trace, |row, _, out| {
+                let c = match watched {
+                    Some(id) if row >= from_row => out.confidences[usize::from(id.0)],
+                    Some(_) => return,
+                    None => out.confidences.iter().copied().max().unwrap_or_default(),
+                };
+                peak = peak.max(c.to_f64());
+            })?;
+            Ok((score::classify(expected, &decisions), peak))
         })
-        .collect::<Result<Vec<Outcome>>>()?;
+        .collect::<Result<Vec<(Outcome, f64)>>>()?
+        .into_iter()
+        .unzip();
     Ok(JobResult {
         job,
         seed,
         outcomes,
+        peaks,
+        bin: scenario.run_bin(&trace),
         seconds: trace.len() as f64 / trace.rate_hz(),
     })
 }
@@ -1123,6 +1156,7 @@ impl Tally {
     fn of(results: &[JobResult], d: usize) -> Tally {
         let scenarios = Scenario::single_event();
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
+        let mut bins: Vec<Vec<Option<usize>>> = vec![Vec::new(); scenarios.len()];
         let mut free_alarms = 0usize;
         let mut free_seconds = 0.0;
         let mut failures = Vec::new();
@@ -1134,7 +1168,10 @@ impl Tally {
                 failures.push((r.job.scenario(), r.seed, outcome.clone()));
             }
             match r.job {
-                Job::Single { index, .. } => outcomes[index].push(outcome.clone()),
+                Job::Single { index, .. } => {
+                    outcomes[index].push(outcome.clone());
+                    bins[index].push(r.bin.map(|b| b.bin));
+                }
                 Job::FreeMotion { .. } => {
                     free_seconds += r.seconds;
                     free_alarms += usize::from(!outcome.is_right());
@@ -1145,7 +1182,20 @@ impl Tally {
             reports: scenarios
                 .iter()
                 .zip(&outcomes)
-                .map(|(s, o)| ScenarioReport::tally(s.name(), s.expected(), o))
+                .zip(&bins)
+                .map(|((s, o), b)| match s.binning() {
+                    Some(binning) => ScenarioReport::tally_binned(
+                        s.name(),
+                        s.expected(),
+                        o,
+                        (
+                            &format!("{} [{}]", binning.parameter, binning.unit),
+                            &binning.labels(),
+                            b,
+                        ),
+                    ),
+                    None => ScenarioReport::tally(s.name(), s.expected(), o),
+                })
                 .collect(),
             free_alarms,
             free_hours: free_seconds / 3600.0,
@@ -1239,17 +1289,33 @@ fn print_comparison(tallies: &[(String, Tally)]) {
     let Some((_, first)) = tallies.first() else {
         return;
     };
+    let cells = |r: &ScenarioReport| {
+        format!(
+            " |     {:>6} {:>5} {:>5} {:>5} {:>6.2} {:>6.2}",
+            r.correct, r.wrong, r.missed, r.repeated, r.latency_ms.median, r.latency_ms.p99
+        )
+    };
     for (i, r) in first.reports.iter().enumerate() {
         let mut line = format!("{:<26} {:>6}", r.name, r.runs);
         for (_, t) in tallies {
             if let Some(r) = t.reports.get(i) {
-                line.push_str(&format!(
-                    " |     {:>6} {:>5} {:>5} {:>5} {:>6.2} {:>6.2}",
-                    r.correct, r.wrong, r.missed, r.repeated, r.latency_ms.median, r.latency_ms.p99
-                ));
+                line.push_str(&cells(r));
             }
         }
         println!("{line}");
+        // Each bin under its scenario, indented, after a line naming what they bin.
+        if !r.bins.is_empty() {
+            println!("  by {}:", r.binned_by);
+        }
+        for (b, bin) in r.bins.iter().enumerate() {
+            let mut line = format!("{:<26} {:>6}", format!("  {}", bin.name), bin.runs);
+            for (_, t) in tallies {
+                if let Some(bin) = t.reports.get(i).and_then(|r| r.bins.get(b)) {
+                    line.push_str(&cells(bin));
+                }
+            }
+            println!("{line}");
+        }
     }
     for (k, (_, t)) in tallies.iter().enumerate() {
         t.print_false_alarms(&format!("[{}] ", k + 1));
@@ -1285,16 +1351,25 @@ fn load_detectors(configs: &[PathBuf]) -> Result<(Vec<Detector>, Vec<String>)> {
     Ok(loaded.into_iter().unzip())
 }
 
+/// `evaluate` on simulated runs: `runs` randomized runs of every single-event scenario
+/// from base seed `seed` and `free_hours` of event-free motion, with each detector of
+/// `configs`; the report as JSON and the figure of peak confidences per bin to `outputs`.
 fn evaluate(
     runs: usize,
     seed: u64,
     configs: &[PathBuf],
     free_hours: f64,
-    json: Option<&Path>,
+    (json, plot_bins): (Option<&Path>, Option<&Path>),
 ) -> Result<()> {
     let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
-    let plan = plan_outputs(&inputs, &[json.map(|p| (p, Kind::File))])?;
+    let plan = plan_outputs(
+        &inputs,
+        &[
+            json.map(|p| (p, Kind::File)),
+            plot_bins.map(|p| (p, Kind::Figure)),
+        ],
+    )?;
     if !(1..=MAX_RUNS).contains(&runs) {
         bail!("--runs = {runs} must be within 1..={MAX_RUNS} runs per scenario");
     }
@@ -1351,8 +1426,52 @@ fn evaluate(
         }
         plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
+    if plot_bins.is_some() {
+        let slot = usize::from(json.is_some());
+        plot::write_bins(plan.staging(slot), &bin_panels(&results))?;
+    }
     plan.commit()?;
     Ok(())
+}
+
+/// One panel per single-event scenario for `--plot-bins`: each run's binning value and its
+/// peak confidence with the first detector, by outcome.
+fn bin_panels(results: &[JobResult]) -> Vec<plot::BinPanel> {
+    Scenario::single_event()
+        .iter()
+        .enumerate()
+        .filter_map(|(index, s)| {
+            let binning = s.binning()?;
+            let mut points: [Vec<(f64, f64)>; 4] = Default::default();
+            for r in results {
+                let (Job::Single { index: i, .. }, Some(bin), Some(outcome), Some(peak)) =
+                    (r.job, r.bin, r.outcomes.first(), r.peaks.first())
+                else {
+                    continue;
+                };
+                if i != index {
+                    continue;
+                }
+                let k = match outcome {
+                    Outcome::Correct { .. } | Outcome::QuietAsExpected => 0,
+                    Outcome::Wrong { .. } => 1,
+                    Outcome::Missed => 2,
+                    Outcome::Repeated { .. } => 3,
+                };
+                points[k].push((bin.value, *peak));
+            }
+            Some(plot::BinPanel {
+                title: s.name().to_string(),
+                x_label: format!("{} [{}]", binning.parameter, binning.unit),
+                y_label: match s.expected() {
+                    Some(e) => format!("peak {e} confidence"),
+                    None => "highest confidence".to_string(),
+                },
+                log_x: binning.log,
+                points,
+            })
+        })
+        .collect()
 }
 
 /// The longest time `--after-ms` and `--window-ms` take: a minute.
@@ -1869,6 +1988,12 @@ mod tests {
         seeds.sort_unstable();
         seeds.dedup();
         assert_eq!(seeds.len(), jobs.len(), "every run its own seed");
+        // Tuning on one base seed and reporting on another uses disjoint runs.
+        let runs = 1000;
+        let n = Scenario::single_event().len() * runs + 60;
+        let tuned: std::collections::HashSet<u64> =
+            (0..n).map(|i| Job::at(i, runs).seed(100)).collect();
+        assert!((0..n).all(|i| !tuned.contains(&Job::at(i, runs).seed(1))));
         // The largest evaluation allowed is made as it runs: its last job is reachable.
         let last = Scenario::single_event().len() * MAX_RUNS;
         assert!(matches!(Job::at(last, MAX_RUNS), Job::FreeMotion { k: 0 }));

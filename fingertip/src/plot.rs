@@ -411,6 +411,134 @@ fn draw_feature<DB: DrawingBackend>(
     Ok(())
 }
 
+/// One scenario's runs for the figure of `evaluate --plot-bins`: each run's value of the
+/// parameter its scenario is binned by against its peak confidence, by outcome.
+#[derive(Clone, Debug)]
+pub struct BinPanel {
+    /// The scenario.
+    pub title: String,
+    /// The parameter and its unit.
+    pub x_label: String,
+    /// What the confidence is of.
+    pub y_label: String,
+    /// A log scale for the parameter (it spans decades).
+    pub log_x: bool,
+    /// `(parameter, peak confidence in [0, 1])` of the runs that went right, confirmed a
+    /// wrong event, missed, and confirmed more than once, in that order.
+    pub points: [Vec<(f64, f64)>; 4],
+}
+
+/// The outcomes of [`BinPanel::points`], with their colours.
+const OUTCOMES: [(&str, RGBColor); 4] = [
+    ("right", RGBColor(0, 158, 115)),
+    ("wrong", RGBColor(213, 94, 0)),
+    ("missed", RGBColor(0, 114, 178)),
+    ("repeated", RGBColor(204, 121, 167)),
+];
+
+/// Writes one panel per scenario to `path`: each run's peak confidence against the
+/// parameter that matters most for it, a dot per run coloured by outcome.
+pub fn write_bins(path: &Path, panels: &[BinPanel]) -> Result<(), PlotError> {
+    let grid = Grid {
+        panels,
+        columns: panels.len().clamp(1, 3),
+    };
+    let size = (460 * grid.columns as u32, 300 * grid.rows() as u32);
+    write_figure(path, size, &grid)
+}
+
+impl Panel for BinPanel {
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+        let xs = self.points.iter().flatten().map(|p| p.0);
+        let (mut lo, mut hi) = xs.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        });
+        if !(lo.is_finite() && hi.is_finite()) || (self.log_x && lo <= 0.0) {
+            (lo, hi) = (1.0, 10.0);
+        }
+        // Some room on either side, so that the outermost runs show whole.
+        let (lo, hi) = if self.log_x {
+            (lo / 1.1, hi * 1.1)
+        } else {
+            let pad = ((hi - lo) * 0.05).max(1e-9 * hi.abs().max(1.0));
+            (lo - pad, hi + pad)
+        };
+        let caption = (
+            self.title.as_str(),
+            ("sans-serif", 16).into_font().style(FontStyle::Bold),
+        );
+        if self.log_x {
+            let mut chart = ChartBuilder::on(area)
+                .caption(caption.0, caption.1)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(45)
+                .build_cartesian_2d((lo..hi).log_scale(), -0.02..1.02)?;
+            chart
+                .configure_mesh()
+                .x_labels(5)
+                .x_label_formatter(&|v| format!("{v:.2e}"))
+                .x_desc(self.x_label.as_str())
+                .y_desc(self.y_label.as_str())
+                .light_line_style(RGBColor(235, 235, 235))
+                .label_style(("sans-serif", 12))
+                .draw()?;
+            draw_outcomes(&mut chart, &self.points)
+        } else {
+            let mut chart = ChartBuilder::on(area)
+                .caption(caption.0, caption.1)
+                .margin(10)
+                .x_label_area_size(35)
+                .y_label_area_size(45)
+                .build_cartesian_2d(lo..hi, -0.02..1.02)?;
+            chart
+                .configure_mesh()
+                .x_labels(5)
+                .x_desc(self.x_label.as_str())
+                .y_desc(self.y_label.as_str())
+                .light_line_style(RGBColor(235, 235, 235))
+                .label_style(("sans-serif", 12))
+                .draw()?;
+            draw_outcomes(&mut chart, &self.points)
+        }
+    }
+}
+
+/// A dot per run, coloured by outcome, with a legend of the outcomes that occur.
+fn draw_outcomes<'a, DB, X>(
+    chart: &mut ChartContext<'a, DB, Cartesian2d<X, plotters::coord::types::RangedCoordf64>>,
+    points: &[Vec<(f64, f64)>; 4],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    X: plotters::coord::ranged1d::Ranged<ValueType = f64>,
+{
+    for ((name, color), runs) in OUTCOMES.iter().zip(points) {
+        if runs.is_empty() {
+            continue;
+        }
+        let color = *color;
+        chart
+            .draw_series(
+                runs.iter()
+                    .map(move |&p| Circle::new(p, 2, color.mix(0.6).filled())),
+            )?
+            .label(format!("{name} ({})", runs.len()))
+            .legend(move |(x, y)| Circle::new((x + 6, y), 3, color.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(200, 200, 200))
+        .label_font(("sans-serif", 12))
+        .draw()?;
+    Ok(())
+}
+
 #[cfg(test)]
 mod message_tests {
     use super::*;

@@ -146,6 +146,12 @@ pub struct ScenarioReport {
     pub repeated: usize,
     /// Latency from true onset to confirmation over the correct runs (ms).
     pub latency_ms: Latency,
+    /// The parameter the runs are binned by, with its unit (empty when not binned).
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub binned_by: String,
+    /// The same tally per bin of that parameter, each named by its range or kind.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub bins: Vec<ScenarioReport>,
 }
 
 impl ScenarioReport {
@@ -176,13 +182,42 @@ impl ScenarioReport {
                 .filter(|o| matches!(o, Outcome::Repeated { .. }))
                 .count(),
             latency_ms: Latency::from_seconds(&latencies),
+            binned_by: String::new(),
+            bins: Vec::new(),
         }
+    }
+
+    /// Tallies outcomes per bin too: `binned` holds each outcome's bin (an index into
+    /// `labels`, `None` for a run that fits no bin), `parameter` names what they bin.
+    pub fn tally_binned(
+        name: &str,
+        expected: Option<&str>,
+        outcomes: &[Outcome],
+        (parameter, labels, binned): (&str, &[String], &[Option<usize>]),
+    ) -> ScenarioReport {
+        let mut report = ScenarioReport::tally(name, expected, outcomes);
+        report.binned_by = parameter.to_string();
+        report.bins = labels
+            .iter()
+            .enumerate()
+            .map(|(b, label)| {
+                let mine: Vec<Outcome> = outcomes
+                    .iter()
+                    .zip(binned)
+                    .filter(|(_, bin)| **bin == Some(b))
+                    .map(|(o, _)| o.clone())
+                    .collect();
+                ScenarioReport::tally(label, expected, &mine)
+            })
+            .collect();
+        report
     }
 }
 
 /// The table of an evaluation, a row per report: right, wrong, missed, repeated and the
 /// latency percentiles; the first column named `first` (scenario or event), with the
 /// expected event beside it when `expected`, the count named `count` (runs or events).
+/// A report's bins follow it, indented, after a line naming the parameter they bin.
 pub fn write_table(
     out: &mut impl std::io::Write,
     (first, count): (&str, &str),
@@ -210,11 +245,11 @@ pub fn write_table(
         "p99 ms",
         "max ms"
     )?;
-    for r in reports {
+    let row = |out: &mut dyn std::io::Write, lead: String, r: &ScenarioReport| {
         writeln!(
             out,
             "{} {:>6} {:>6} {:>6} {:>6} {:>6}   {:>7.2} {:>7.2} {:>7.2} {:>7.2}",
-            lead(&r.name, &r.expected),
+            lead,
             r.runs,
             r.correct,
             r.wrong,
@@ -224,7 +259,17 @@ pub fn write_table(
             r.latency_ms.p95,
             r.latency_ms.p99,
             r.latency_ms.max
-        )?;
+        )
+    };
+    for r in reports {
+        row(out, lead(&r.name, &r.expected), r)?;
+        // Each bin under its scenario, indented, after a line naming what they bin.
+        if !r.bins.is_empty() {
+            writeln!(out, "  by {}:", r.binned_by)?;
+        }
+        for b in &r.bins {
+            row(out, lead(&format!("  {}", b.name), ""), b)?;
+        }
     }
     Ok(())
 }
@@ -447,6 +492,41 @@ mod tests {
             "{}",
             s.outside_s
         );
+    }
+
+    /// Bins tally their own runs; a run in no bin counts for the scenario only.
+    #[test]
+    fn tally_binned_splits_the_runs() {
+        let outcomes = [
+            Outcome::Correct { latency_s: 0.001 },
+            Outcome::Missed,
+            Outcome::Correct { latency_s: 0.004 },
+            Outcome::Missed,
+        ];
+        let labels = ["soft".to_string(), "hard".to_string()];
+        let r = ScenarioReport::tally_binned(
+            "s",
+            Some("contact"),
+            &outcomes,
+            (
+                "stiffness [N/m]",
+                &labels,
+                &[Some(1), Some(0), Some(1), None],
+            ),
+        );
+        assert_eq!((r.runs, r.correct, r.missed), (4, 2, 2));
+        assert_eq!(r.binned_by, "stiffness [N/m]");
+        let counts: Vec<(&str, usize, usize, usize)> = r
+            .bins
+            .iter()
+            .map(|b| (b.name.as_str(), b.runs, b.correct, b.missed))
+            .collect();
+        assert_eq!(counts, [("soft", 1, 0, 1), ("hard", 2, 2, 0)]);
+        assert_eq!(r.bins[1].latency_ms.max, 4.0);
+        let mut table = Vec::new();
+        write_table(&mut table, ("scenario", "runs"), true, &[r]).unwrap();
+        let table = String::from_utf8(table).unwrap();
+        assert!(table.contains("  by stiffness [N/m]:\n  soft "), "{table}");
     }
 
     #[test]

@@ -12,7 +12,7 @@ fn opts(seed: u64, randomize: bool) -> SimOptions {
 
 #[test]
 fn same_seed_same_trace() {
-    for s in Scenario::table1() {
+    for s in Scenario::single_event() {
         for randomize in [false, true] {
             let a = sim::simulate(s, &opts(42, randomize)).unwrap();
             let b = sim::simulate(s, &opts(42, randomize)).unwrap();
@@ -122,4 +122,35 @@ fn scenario_names_and_expected_events() {
     for s in Scenario::all() {
         assert!(e.contains(s.name()), "{e} does not list {s}");
     }
+}
+
+/// Every randomized run of every single-event scenario falls in a bin of its scenario's
+/// binning, every bin gets runs, and the bin holds the run's own parameter.
+#[test]
+fn every_run_falls_in_a_bin_of_what_matters_most() {
+    use fingertip::sim::Split;
+    for s in Scenario::single_event() {
+        let binning = s.binning().expect("single-event scenarios are binned");
+        let labels = binning.labels();
+        let mut seen = vec![0usize; labels.len()];
+        for seed in 0..60 {
+            let tr = sim::simulate(s, &opts(seed, true)).unwrap();
+            let bin = s
+                .run_bin(&tr)
+                .unwrap_or_else(|| panic!("{s} seed {seed}: no bin"));
+            seen[bin.bin] += 1;
+            assert!(bin.value.is_finite() && bin.value > 0.0, "{s}: {bin:?}");
+            if let Split::Edges(edges) = binning.split {
+                // Inside the edges, in its own range; beyond them, in the outer bin.
+                let (lo, hi) = (edges[bin.bin], edges[bin.bin + 1]);
+                let last = edges.len() - 2;
+                let placed = (lo..=hi).contains(&bin.value)
+                    || (bin.bin == 0 && bin.value < lo)
+                    || (bin.bin == last && bin.value > hi);
+                assert!(placed, "{s}: {} in {}", bin.value, labels[bin.bin]);
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 0), "{s}: {labels:?} got {seen:?}");
+    }
+    assert!(Scenario::FreeMotion.binning().is_none());
 }

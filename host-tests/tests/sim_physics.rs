@@ -38,6 +38,26 @@ fn baseline(x: &[f64], row: usize) -> f64 {
     mean(&x[row.saturating_sub(10 * MS)..row])
 }
 
+/// A parameter's value in a run, from its metadata.
+fn param(tr: &Trace, key: &str) -> f64 {
+    tr.meta(&format!("param.{key}"))
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no parameter {key}"))
+}
+
+/// The whole finger's mass, link 1 to skin, in a run (kg).
+fn finger_mass(tr: &Trace) -> f64 {
+    ["arm_mass", "distal_mass", "carrier_mass", "skin_mass"]
+        .iter()
+        .map(|m| param(tr, &format!("plant.{m}")))
+        .sum()
+}
+
+/// The position loop's stiffness in a run: the finger's mass x (2 pi bandwidth)^2 (N/m).
+fn loop_stiffness(tr: &Trace) -> f64 {
+    finger_mass(tr) * (std::f64::consts::TAU * param(tr, "plant.control_bandwidth")).powi(2)
+}
+
 fn onset_row(tr: &Trace) -> usize {
     tr.truth_onset().expect("the run has a truth onset").0
 }
@@ -78,15 +98,34 @@ fn contacts_force_rises_against_motion_and_stress_rate_fires() {
             let sr = col(&tr, "stress_rate");
             let what = format!("{s} seed {seed}");
             assert_eq!(tr.truth_onset().unwrap().1, "contact", "{what}");
-            // Quiet before the onset, firing within 2 ms after it.
+            // Quiet before the onset, firing within 2 ms after it, and first upwards: the
+            // force pressing the pad rises. (A rigid object struck fast makes the film clip
+            // both ways as the skin bounces, so its mean over the 2 ms says nothing.)
             assert!(
                 max_abs(&sr[..on]) < STRESS_QUIET,
                 "{what}: stress rate before onset"
             );
-            let fired = mean(&sr[on..on + 2 * MS]) - baseline(sr, on);
+            let b_sr = baseline(sr, on);
+            let first = sr[on..on + 2 * MS]
+                .iter()
+                .map(|x| x - b_sr)
+                .find(|x| x.abs() > 6.0);
+            // The film reads stiffness x speed at first touch: tens of N/s and more, but a
+            // soft object of 100-300 N/m at 2 cm/s gives 2-6 N/s, within the film's noise
+            // (a very soft one's case, tested below).
+            let soft = [
+                Scenario::ContactSoft8,
+                Scenario::ContactSoft5,
+                Scenario::ContactSoft2,
+            ];
+            let faint = soft.contains(&s)
+                && param(&tr, "soft_object.stiffness")
+                    * s.nominal_speed()
+                    * param(&tr, "motion.speed_factor")
+                    < 10.0;
             assert!(
-                fired > 6.0,
-                "{what}: stress rate must fire within 2 ms: {fired}"
+                faint || first.is_some_and(|x| x > 0.0),
+                "{what}: stress rate must fire upwards within 2 ms: {first:?}"
             );
             // The force (less the sensor's offset) opposes the motion from 5 ms on, in
             // every 1 ms average, and keeps rising over 20 ms (an object that slides keeps
@@ -98,7 +137,27 @@ fn contacts_force_rises_against_motion_and_stress_rate_fires() {
             // first 10 ms only.
             let short = matches!(s, Scenario::ObjectMoves5 | Scenario::ContactBraking);
             let until = if short { 10 } else { 25 };
-            for k in 5..until {
+            // A soft object's force (its stiffness in series with the foam's, less what
+            // relaxes, x speed x time) reaches the sensor through the fingertip's suspension
+            // (a quarter of its period, up to 12 ms) and is above the noise (30 mN) from
+            // 5 ms on, the softest's (100 N/m at 2 cm/s) from 15 ms on.
+            let (from, rise) = match s {
+                Scenario::ContactSoft8 | Scenario::ContactSoft5 | Scenario::ContactSoft2 => {
+                    let p = |k: &str| param(&tr, k);
+                    let foam = p("plant.foam_stiffness");
+                    let k = 1.0 / (1.0 / p("soft_object.stiffness") + 1.0 / foam)
+                        * (1.0 - p("surface.relaxation"));
+                    let rate = k * s.nominal_speed() * p("motion.speed_factor");
+                    let quarter =
+                        std::f64::consts::FRAC_PI_2 * (p("plant.skin_mass") / foam).sqrt();
+                    let from = (((0.03 / rate + quarter) * 1e3).ceil() as usize).clamp(5, 15);
+                    // Over the 15 ms from 5 to 20 ms it rises by rate x 15 ms: half of that,
+                    // or 50 mN, shows.
+                    (from, (0.5 * rate * 0.015).min(0.05))
+                }
+                _ => (5, 0.05),
+            };
+            for k in from..until {
                 let w = on + k * MS..on + (k + 1) * MS;
                 let fv = (mean(&f[w.clone()]) - b) * mean(&v[w]);
                 assert!(fv < 0.0, "{what}: force . velocity = {fv} at {k} ms");
@@ -106,10 +165,22 @@ fn contacts_force_rises_against_motion_and_stress_rate_fires() {
             let early = mean(&f[on + 4 * MS..on + 6 * MS]) - b;
             let later = mean(&f[on + 19 * MS..on + 21 * MS]) - b;
             if s == Scenario::ObjectMoves5 {
-                assert!(later < -0.2, "{what}: pushing the object: {later}");
+                // To set the object sliding the fingertip pushed with its static friction
+                // (more than the kinetic, mu m g) at some point; a heavy object not yet
+                // sliding after 20 ms is pushed ever harder.
+                let friction = param(&tr, "movable_object.friction")
+                    * param(&tr, "movable_object.mass")
+                    * 9.81;
+                let pushed = (0..20)
+                    .map(|k| mean(&f[on + k * MS..on + (k + 1) * MS]) - b)
+                    .fold(f64::MAX, f64::min);
+                assert!(
+                    pushed < -0.8 * friction || later < early - 0.05,
+                    "{what}: pushing the object: {pushed} vs friction {friction}"
+                );
             } else if !short {
                 assert!(
-                    later < early - 0.05,
+                    later < early - rise,
                     "{what}: force rises: {early} then {later}"
                 );
             }
@@ -139,6 +210,8 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
         Scenario::LinkCollision2,
         Scenario::DisturbanceLarge5,
         Scenario::DisturbanceSmall5,
+        Scenario::KnockLink1,
+        Scenario::KnockLink2,
     ] {
         for seed in 0..SEEDS {
             let tr = run(s, seed, seed > 0);
@@ -150,11 +223,27 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
                 .map(|x| x - b)
                 .collect();
             assert_stress_quiet(&tr, &what);
-            // The force oscillates: it takes both signs, well above noise, and its mean is
-            // small against its swing.
+            // The force oscillates: it takes both signs, above noise, and its mean is small
+            // against its swing. A small burst below the structure's modes (down to 0.3 N
+            // at 40 Hz) shakes the whole finger and loads the sensor with the carrier's
+            // share of its force only, and a small tap or a knock (from 0.5 N) on a link
+            // reaches the tip through the damped bending mode: twice the base noise either
+            // way.
             let hi = f.iter().cloned().fold(f64::MIN, f64::max);
             let lo = f.iter().cloned().fold(f64::MAX, f64::min);
-            assert!(hi > 0.05 && lo < -0.05, "{what}: force swings {lo}..{hi}");
+            let small = [
+                Scenario::DisturbanceSmall5,
+                Scenario::KnockLink1,
+                Scenario::KnockLink2,
+            ];
+            let swing = if small.contains(&s) { 0.02 } else { 0.05 };
+            if tr.meta("disturbance_body") == Some("tip") {
+                // Struck above the sensor, the fingertip's housing loads it with the blow
+                // itself, one-sided; the ringing after it is smaller.
+                assert!(hi - lo > 2.0 * swing, "{what}: force swings {lo}..{hi}");
+                continue;
+            }
+            assert!(hi > swing && lo < -swing, "{what}: force swings {lo}..{hi}");
             assert!(
                 mean(&f).abs() < 0.25 * (hi - lo),
                 "{what}: mean {} vs swing {}",
@@ -175,17 +264,46 @@ fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
     };
     for seed in 0..SEEDS {
         let r = seed > 0;
-        for s in [
-            Scenario::ContactHard2,
-            Scenario::ContactSoft2,
-            Scenario::ContactHard8,
-        ] {
+        for s in [Scenario::ContactHard2, Scenario::ContactHard8] {
             let g = growth(&run(s, seed, r));
             assert!(g > 25e-6, "{s} seed {seed}: {g}");
         }
+        // A soft object (100 to 3000 N/m) at 2 cm/s pushes back by a tenth of a newton or
+        // more after 100 ms; the position loop gives way by that force over its stiffness
+        // (total mass x (2 pi bandwidth)^2): at least half of it shows.
+        let tr = run(Scenario::ContactSoft2, seed, r);
+        let kp = loop_stiffness(&tr);
+        let on = onset_row(&tr);
+        let f = col(&tr, "force_x");
+        let pushed = baseline(f, on) - mean(&f[on + 95 * MS..on + 105 * MS]);
+        assert!(pushed > 0.1, "contact_soft_2 seed {seed}: force {pushed}");
+        let g = growth(&tr);
+        assert!(
+            g > 0.5 * pushed / kp,
+            "contact_soft_2 seed {seed}: {g} (force over loop stiffness: {})",
+            pushed / kp
+        );
         for s in [Scenario::LinkCollision2, Scenario::LinkCollision8] {
-            let g = growth(&run(s, seed, r));
-            assert!(g > 700e-6, "{s} seed {seed}: {g}");
+            let tr = run(s, seed, r);
+            let g = growth(&tr);
+            if tr.meta("struck_link") == Some("link1") {
+                assert!(g > 700e-6, "{s} seed {seed}: {g}");
+                continue;
+            }
+            // Link 2 stopped, link 1 goes on bending the distal structure until its spring
+            // holds the position loop: the error grows by the commanded travel times
+            // k_link / (k_link + k_loop).
+            let p = |k: &str| param(&tr, k);
+            let (arm, tip) = (
+                p("plant.arm_mass"),
+                p("plant.distal_mass") + p("plant.carrier_mass") + p("plant.skin_mass"),
+            );
+            let w = |f: f64| (std::f64::consts::TAU * f).powi(2);
+            let k_link = arm * tip / (arm + tip) * w(p("plant.link_frequency"));
+            let k_loop = loop_stiffness(&tr);
+            let travel = 0.1 * s.nominal_speed() * p("motion.speed_factor");
+            let expected = travel * k_link / (k_link + k_loop);
+            assert!(g > 0.7 * expected, "{s} seed {seed}: {g} of {expected}");
         }
         for s in [
             Scenario::DisturbanceLarge5,
@@ -197,9 +315,15 @@ fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
             let tr = run(s, seed, r);
             let on = onset_row(&tr);
             let e = col(&tr, "pos_err_x");
-            // Disturbed, then brought back by the controller.
-            let g = e[on + 100 * MS] - e[on];
-            assert!(g.abs() < 15e-6, "{s} seed {seed}: {g}");
+            // Disturbed, then brought back by the controller: at the run's end (30 ms or
+            // more after the longest burst) the error is back within 15 um of where it was,
+            // or at least halfway back (a 10 Hz position loop takes its time).
+            let g = e[e.len() - 1] - e[on];
+            let peak = e[on..].iter().fold(0.0f64, |m, x| m.max((x - e[on]).abs()));
+            assert!(
+                g.abs() < 15e-6 || g.abs() < 0.5 * peak,
+                "{s} seed {seed}: {g} (peak {peak})"
+            );
         }
     }
 }
@@ -290,20 +414,46 @@ fn sudden_acceleration_loads_the_force_sensor_with_the_fingertip_mass() {
             );
             let a = acc[first];
             let param = |k: &str| tr.meta(k).unwrap().parse::<f64>().unwrap();
-            let m = param("param.plant.carrier_mass") + param("param.plant.skin_mass");
-            // The tip follows the command within a few ms, through the structure's
-            // compliance; over the step and 3 ms after, the force averages about -m a.
-            let b = baseline(f, first);
-            let window = &f[first..(last + 3 * MS).min(tr.len())];
-            let avg = mean(window) - b;
+            let carrier = param("param.plant.carrier_mass");
+            let m = carrier + param("param.plant.skin_mass");
+            // The drive's force limit caps the acceleration the finger reaches.
+            let total = m + param("param.plant.arm_mass") + param("param.plant.distal_mass");
+            let a = a.min(param("param.plant.force_limit") / total);
+            // The sensor carries the momentum the fingertip above it gains: over the step
+            // and whole periods of the structure's ringing after it (20 ms or more), the
+            // force integrates to about -m dv, m the carrier's mass at least (a padded skin
+            // on soft foam, at 20 Hz, lags behind), the carrier's and the skin's at most.
+            let step = (param("command_onset_s") * 5000.0).round() as usize;
+            let period = 1.0 / param("param.plant.link_frequency");
+            let duration = a.recip() * param("param.sudden_accel.velocity_change");
+            let after = (0.02 / period).ceil() * period;
+            let end = step + ((duration + after) * 5000.0).round() as usize;
+            let b = baseline(f, step);
+            let impulse: f64 = f[step..end.min(tr.len())]
+                .iter()
+                .map(|x| x - b)
+                .sum::<f64>()
+                / 5000.0;
+            let dv = a * duration;
             assert!(
-                avg < -0.5 * m * a && avg > -1.5 * m * a,
-                "{what}: mean force {avg} vs -m a = {}",
-                -m * a
+                impulse < -0.5 * carrier * dv && impulse > -1.5 * m * dv,
+                "{what}: impulse {impulse} N s vs -m dv = {}",
+                -m * dv
             );
-            // Before the step the sensor reads only noise (and hum, and drift).
-            let quiet = f[..first].iter().fold(0.0f64, |m, x| m.max((x - b).abs()));
-            assert!(quiet < 0.12, "{what}: {quiet}");
+            // Before the step (the controller's: its context arrives a latency later) the
+            // sensor reads only noise (and hum, and drift): 0.12 N with the hum's
+            // fundamental, plus its harmonics' amplitudes.
+            assert!(
+                step <= first && first <= step + 5,
+                "{what}: context at {first}"
+            );
+            let quiet = f[..step].iter().fold(0.0f64, |m, x| m.max((x - b).abs()));
+            let harmonics = (param("param.sensors.hum_harmonic2")
+                + param("param.sensors.hum_harmonic3"))
+                * param("param.sensors.hum_lsb")
+                * 40.0
+                / 4096.0;
+            assert!(quiet < 0.12 + harmonics, "{what}: {quiet}");
             assert_stress_quiet(&tr, &what);
         }
     }
@@ -342,9 +492,11 @@ fn truth_onset_is_the_physical_onset() {
             let onset: f64 = tr.meta(sim::META_ONSET).unwrap().parse().unwrap();
             let scheduled: f64 = tr.meta("scheduled_onset_s").unwrap().parse().unwrap();
             // The physical onset is where it was staged; the drive's ripple and friction
-            // move the tip by a few micrometres, i.e. a fraction of a millisecond at
-            // 2 cm/s. A nominal run is within an integration step or two.
-            let tol = if r { 0.5e-3 } else { 50e-6 };
+            // move the tip by micrometres (up to 20 on the softest, 10 Hz, position loop),
+            // i.e. up to a millisecond at 2 cm/s. A nominal run is within an integration
+            // step or two.
+            let internal: f64 = tr.meta("internal_rate_hz").unwrap().parse().unwrap();
+            let tol = if r { 1e-3 } else { 2.0 / internal };
             assert!(
                 (onset - scheduled).abs() < tol,
                 "{what}: {onset} vs {scheduled}"
@@ -358,10 +510,12 @@ fn truth_onset_is_the_physical_onset() {
             let truth = tr.truth().unwrap();
             assert!(truth.iter().skip(row).all(|e| e == event), "{what}");
         }
-        // The nominal runs reproduce Table 1: the event at 20 ms.
+        // The nominal runs reproduce Table 1: the event at 20 ms, within two integration
+        // steps.
         let tr = run(*s, 7, false);
         let onset: f64 = tr.meta(sim::META_ONSET).unwrap().parse().unwrap();
-        assert!((onset - 0.020).abs() < 50e-6, "{s}: {onset}");
+        let internal: f64 = tr.meta("internal_rate_hz").unwrap().parse().unwrap();
+        assert!((onset - 0.020).abs() < 2.0 / internal, "{s}: {onset}");
         assert_eq!(tr.len(), 751, "{s}: 150 ms at 5 kHz");
     }
 }
@@ -381,4 +535,204 @@ fn onset_follows_the_randomized_schedule() {
     let spread = onsets.iter().cloned().fold(f64::MIN, f64::max)
         - onsets.iter().cloned().fold(f64::MAX, f64::min);
     assert!(spread > 0.01, "onsets vary: {spread}");
+}
+
+/// The drive's force is limited: a finger pressing on a rigid object at 8 cm/s never
+/// pushes harder than its limit, and often ends up pushing with it (the controller's error
+/// keeps growing; a padded tip on soft foam may not get there in 130 ms).
+#[test]
+fn drive_force_is_limited() {
+    let mut limited = 0;
+    let mut reached = 0;
+    for seed in 1..=SEEDS {
+        let tr = run(Scenario::ContactHard8, seed, true);
+        let limit = param(&tr, "plant.force_limit");
+        // Below the sensor's 20 N full scale, and with a margin for its gain error.
+        if limit > 16.0 {
+            continue;
+        }
+        limited += 1;
+        let f = col(&tr, "force_x");
+        let on = onset_row(&tr);
+        let pressing = baseline(f, on) - mean(&f[f.len() - 10 * MS..]);
+        let gain = param(&tr, "sensors.force_x_gain");
+        // The limit is per axis, and the sensor's x reading takes in a share of the y force
+        // (at most the limit too) through its misalignment and cross-axis sensitivity. When
+        // the drive saturates the finger still moves: its momentum, stopped through the
+        // foam, adds speed x sqrt(foam stiffness x mass) at most.
+        let mixed = param(&tr, "sensors.force_misalignment").sin().abs()
+            + param(&tr, "sensors.force_x_cross_axis").abs();
+        let p = |k: &str| param(&tr, k);
+        let momentum =
+            0.08 * p("motion.speed_factor") * (p("plant.foam_stiffness") * finger_mass(&tr)).sqrt();
+        assert!(
+            pressing < 1.05 * gain * (limit * (1.0 + mixed) + momentum),
+            "seed {seed}: pressing with {pressing} N, limit {limit} N"
+        );
+        reached += usize::from(pressing > 0.8 * gain * limit);
+    }
+    assert!(limited >= 5, "{limited} runs with a limit below 16 N");
+    assert!(
+        3 * reached >= limited,
+        "{reached} of {limited} reached their limit"
+    );
+}
+
+/// Cruising, the position error is the friction the controller leaves uncompensated over
+/// the position loop's stiffness.
+#[test]
+fn friction_compensation_sets_the_cruising_error() {
+    for seed in 1..=SEEDS {
+        let tr = run(Scenario::ContactHard5, seed, true);
+        let p = |k: &str| param(&tr, k);
+        let kp = loop_stiffness(&tr);
+        let v = 0.05 * p("motion.speed_factor") * p("motion.approach_angle").cos();
+        let friction = p("plant.arm_coulomb_friction") + p("plant.arm_viscous_friction") * v;
+        let expected = (1.0 - p("plant.friction_compensation")) * friction / kp;
+        let on = onset_row(&tr);
+        let e = mean(&col(&tr, "pos_err_x")[..on]);
+        assert!(
+            (e - expected).abs() < 0.2 * expected + 2e-6,
+            "seed {seed}: error {e} m, expected {expected} m"
+        );
+    }
+}
+
+/// A tap on the fingertip's housing loads the force sensor with the blow itself; a
+/// link collision strikes link 1 or link 2, both drawn.
+#[test]
+fn taps_on_the_tip_load_the_sensor_and_collisions_strike_either_link() {
+    let mut taps = 0;
+    for seed in 1..=3 * SEEDS {
+        let tr = run(Scenario::DisturbanceLarge5, seed, true);
+        if tr.meta("disturbance_body") != Some("tip")
+            || tr.meta("disturbance_kind") != Some("impulse")
+        {
+            continue;
+        }
+        taps += 1;
+        let on = onset_row(&tr);
+        let f = col(&tr, "force_x");
+        let b = baseline(f, on);
+        let seen = f[on..on + 5 * MS]
+            .iter()
+            .fold(0.0f64, |m, x| m.max((x - b).abs()));
+        let direction: f64 = tr
+            .meta("disturbance_direction_rad")
+            .unwrap()
+            .parse()
+            .unwrap();
+        // The blow accelerates link 2 and the carrier together: the sensor between them
+        // carries link 2's share of it (the anti-alias filter takes up to half of a
+        // 0.5 ms pulse's peak).
+        let (link2, carrier) = (
+            param(&tr, "plant.distal_mass"),
+            param(&tr, "plant.carrier_mass"),
+        );
+        let blow = param(&tr, "large_disturbance.impulse_peak") * direction.cos().abs();
+        let share = link2 / (link2 + carrier);
+        assert!(
+            seen > 0.5 * share * blow,
+            "seed {seed}: {seen} N of a {blow} N blow"
+        );
+    }
+    assert!(taps >= 5, "{taps} taps on the tip");
+    let struck: Vec<String> = (1..=20)
+        .map(|seed| {
+            let tr = run(Scenario::LinkCollision8, seed, true);
+            tr.meta("struck_link").unwrap().to_string()
+        })
+        .collect();
+    assert!(struck.iter().any(|s| s == "link1") && struck.iter().any(|s| s == "link2"));
+    assert_eq!(
+        run(Scenario::LinkCollision8, 1, false).meta("struck_link"),
+        Some("link1")
+    );
+}
+
+/// Free motion changes its cruising velocity gently (0.2 to 3 m/s^2) while moving, besides
+/// its sudden accelerations, and turns.
+#[test]
+fn free_motion_changes_velocity_gently_while_moving() {
+    let tr = sim::simulate(
+        &Scenario::FreeMotion,
+        &SimOptions {
+            seed: 4,
+            randomize: true,
+            duration_s: Some(20.0),
+            ..SimOptions::default()
+        },
+    )
+    .unwrap();
+    let (ax, ay) = (col(&tr, "acc_des_x"), col(&tr, "acc_des_y"));
+    let (vx, vy) = (col(&tr, "vel_des_x"), col(&tr, "vel_des_y"));
+    let mut gentle_while_moving = 0;
+    let mut sudden = 0;
+    for k in 1..tr.len() {
+        let a = ax[k].hypot(ay[k]);
+        let v = vx[k].hypot(vy[k]);
+        if (0.2..=3.0).contains(&a) && v > 0.01 {
+            gentle_while_moving += 1;
+        }
+        if a > 10.0 {
+            sudden += 1;
+        }
+    }
+    // Rows at 5 kHz: a second of gentle ramps while moving, and some sudden ones.
+    assert!(gentle_while_moving > 5000, "{gentle_while_moving}");
+    assert!(sudden > 0, "{sudden}");
+    assert!(max_abs(vx) <= 0.1 + 1e-9 && max_abs(vy) <= 0.1 + 1e-9);
+}
+
+/// The fingertip's suspension: after a sudden acceleration from standstill, a padded tip on
+/// soft foam rings at sqrt(foam stiffness / skin mass) / 2 pi (20 to 80 Hz), and the force
+/// sensor, which carries the foam's force, shows it: the strongest frequency of its
+/// reading over the next 150 ms, from 10 Hz to below the bending mode, is that mode's.
+#[test]
+fn padded_tip_rings_at_its_suspension_mode() {
+    let mut checked = 0;
+    for seed in 1..=15 * SEEDS {
+        let tr = run(Scenario::SuddenAccelStandstill, seed, true);
+        let p = |k: &str| param(&tr, k);
+        let mode =
+            (p("plant.foam_stiffness") / p("plant.skin_mass")).sqrt() / std::f64::consts::TAU;
+        // Well apart from the bending mode and from the position loop (whose bandwidth, up
+        // to 50 Hz, couples with a mode near it and pulls it).
+        // And a quiet mains: its hum (up to 3 LSB, 29 mN, at 50 Hz and its harmonics) would
+        // outlast the mode's decay.
+        if !(20.0..=80.0).contains(&mode)
+            || p("plant.link_frequency") < 3.0 * mode
+            || p("plant.control_bandwidth") > 0.5 * mode
+            || p("sensors.hum_lsb") > 0.75
+        {
+            continue;
+        }
+        checked += 1;
+        let f = col(&tr, "force_x");
+        let step: f64 = tr.meta("command_onset_s").unwrap().parse().unwrap();
+        let end = (step * 5000.0).round() as usize + 5 * MS;
+        let window = &f[end..(end + 150 * MS).min(f.len())];
+        let m = mean(window);
+        // A scan of the spectrum (a DFT at each frequency), 0.5 Hz apart.
+        let power = |hz: f64| {
+            let (mut c, mut s) = (0.0, 0.0);
+            for (k, x) in window.iter().enumerate() {
+                let phase = std::f64::consts::TAU * hz * k as f64 / 5000.0;
+                c += (x - m) * phase.cos();
+                s += (x - m) * phase.sin();
+            }
+            c * c + s * s
+        };
+        // Below the bending mode, which rings on the sensor too.
+        let top = (0.6 * p("plant.link_frequency")).min(150.0);
+        let strongest = (20..(2.0 * top) as usize)
+            .map(|k| k as f64 * 0.5)
+            .max_by(|a, b| power(*a).total_cmp(&power(*b)))
+            .unwrap_or(0.0);
+        assert!(
+            (strongest - mode).abs() < 0.2 * mode,
+            "seed {seed}: strongest at {strongest} Hz, the suspension at {mode} Hz"
+        );
+    }
+    assert!(checked >= 5, "{checked} padded tips");
 }

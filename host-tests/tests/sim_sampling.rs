@@ -59,8 +59,20 @@ fn detector_rate_is_a_parameter() {
         assert_eq!(tr.len(), (0.150 * rate).round() as usize + 1);
         let (row, _) = tr.truth_onset().unwrap();
         assert!((tr.time()[row] - 0.020).abs() <= 1.0 / rate + 1e-6);
+        // The internal rate resolves the stiffest mode (0.35 rad of its phase per step at
+        // most), is a multiple of the detector rate, and at least twice it.
         let internal: f64 = tr.meta("internal_rate_hz").unwrap().parse().unwrap();
-        assert!(internal >= 50_000.0 && (internal / rate).fract() == 0.0);
+        let stiffest: f64 = tr.meta("stiffest_mode_hz").unwrap().parse().unwrap();
+        assert!(
+            stiffest > 1000.0,
+            "a hard contact's skin mode: {stiffest} Hz"
+        );
+        assert!(
+            internal >= std::f64::consts::TAU * stiffest / 0.35,
+            "{internal}"
+        );
+        assert!(internal >= sim::MIN_INTERNAL_RATE_HZ && internal >= 2.0 * rate);
+        assert_eq!((internal / rate).fract(), 0.0);
     }
 }
 

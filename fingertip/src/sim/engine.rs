@@ -6,46 +6,50 @@
 //! Three bodies in a chain, integrated with semi-implicit (symplectic) Euler:
 //!
 //! ```text
-//!  controller force ─> [arm] ──link spring/damper── [distal link + carrier] ──foam── [skin] ─> object
-//!                        │                               │ (force sensor between        (contact on x,
-//!                   obstacle (x),                        │  distal link and carrier)     friction on y)
-//!                   knock                           disturbance
+//!  joint controller ─> [link 1] ──bending mode── [link 2 + carrier] ──foam── [skin] ─> object
+//!                        │                          │   (force sensor between     (normal force and
+//!               obstacle, knock            obstacle, knock,  link 2 and carrier)   friction, on a
+//!                                          tap on the tip                          tilted surface)
 //! ```
 //!
-//! - `arm`: the proximal part of the finger, position-controlled by a PD law with
-//!   feedforward of the commanded acceleration, run at the controller rate on the
-//!   motor-side position (quantized to the encoder resolution). The drive adds a small
-//!   force ripple whose frequency follows the commanded speed. In a link collision the arm
-//!   strikes the obstacle (Hunt-Crossley contact along x); a knock on the proximal link
-//!   acts here.
-//! - `distal`: the distal link and the fingertip's carrier, joined to the arm by the
-//!   structural compliance. Other disturbances act here, below the force sensor.
-//! - `skin`: the rubber skin on the foam core. Contact with an object acts on the skin:
-//!   a Hunt-Crossley normal force along x and a stick-slip (spring-slider) friction along y.
-//!   A movable object is a mass on a table with Coulomb friction (static and kinetic).
+//! - `arm` (link 1): the proximal part of the finger, moved by a digital joint controller
+//!   (PD with an erring feedforward and partial friction compensation, at its own loop
+//!   rate, on the motor-side position quantized to the encoder resolution, its force
+//!   limited). The drive adds friction and a small force ripple whose frequency follows
+//!   the commanded speed.
+//! - `distal` (link 2 and the fingertip's carrier): joined to link 1 by the distal
+//!   structure's compliance, its bending mode. A tap on the tip strikes the carrier, above
+//!   the force sensor.
+//! - `skin`: the skin (and any pad) on the foam core, the fingertip's suspension mode.
+//!   Contact acts on the skin: a normal force along the surface's normal (Hunt-Crossley on a
+//!   soft object, with viscoelastic relaxation; Hertz on a rigid one) and stick-slip
+//!   friction along its tangent. Its damping is integrated implicitly, so that a stiff,
+//!   well-damped contact stays stable at any force.
 //!
 //! # Sensors
 //!
 //! - Force (x, y): the load the fingertip above the sensor puts on it,
-//!   `-(carrier_mass * distal_accel) - foam_force_on_skin`: in quiet contact this is the
-//!   force the environment exerts on the fingertip; in free motion it is the inertia of the
-//!   carrier and skin, so it oscillates about zero when the fingertip rings and reads
-//!   `-m a` in a commanded acceleration.
-//! - Skin acceleration: the skin's x acceleration plus a cross-axis share of its y
-//!   acceleration, through a first-order AC coupling.
-//! - Stress rate: the rate of change of the contact's normal force, plus a small crosstalk
-//!   from the rate of the foam force (film bending), zero when nothing changes.
+//!   `-(carrier_mass * distal_accel) - foam_force_on_skin + tap_on_tip`, seen through the
+//!   sensor's mounting misalignment and cross-axis sensitivity.
+//! - Skin acceleration: the skin's acceleration along the accelerometer's (misaligned)
+//!   axis plus a cross-axis share, through a first-order AC coupling.
+//! - Stress rate: the rate of change of the contact force pressing the pad (its component
+//!   along the pad normal x), plus a small crosstalk from the rate of the foam force (film
+//!   bending), zero when nothing changes.
 //! - Every analog channel then passes the 4th-order anti-alias filter at the internal rate
 //!   and is sampled at the detector rate by a 12-bit ADC with gain error, offset, drift,
-//!   50 Hz hum and white noise, clipped at its full scale.
-//! - Context (from the controller, held between its ticks): position error (commanded
-//!   minus the encoder-measured tip position), commanded velocity and acceleration.
+//!   mains hum with its harmonics and white noise, clipped at its full scale.
+//! - Context (from the controller at its own rate, each message arriving after a latency):
+//!   position error (commanded minus the encoder-measured tip position), commanded
+//!   velocity and acceleration.
 
-use super::CHANNELS;
 use super::filters::{AntiAliasFilter, HighPass1};
 use super::params::{Plant, Sensors};
 use super::trajectory::Trajectory;
+use super::{CHANNELS, MIN_INTERNAL_RATE_HZ};
 use rand::{Rng, RngExt};
+use rand_distr::StandardNormal;
+use std::collections::VecDeque;
 use std::f64::consts::{PI, TAU};
 
 /// Standard gravity, for the movable object's friction.
@@ -57,32 +61,89 @@ const FRICTION_SPEED: f64 = 0.001;
 /// Resolution of the tip position the controller computes from its joint encoders.
 pub(crate) const ENCODER_RESOLUTION: f64 = 1e-6;
 
-/// An object the skin can touch (its surface is normal to x).
+/// The fastest approach of any scenario (m/s), for bounding impact forces.
+const FASTEST_APPROACH: f64 = 0.1;
+
+/// The largest step of a mode's phase per integration step (rad) that the internal rate
+/// allows: semi-implicit Euler then gets a mode's frequency right within 0.5 %.
+const MAX_PHASE_STEP: f64 = 0.35;
+
+/// How the normal force of a contact grows with depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) enum ContactLaw {
+    /// `stiffness x depth`: a soft object.
+    Linear { stiffness: f64 },
+    /// `K depth^1.5` (Hertz), with `K` such that the force is 1 N at a depth of
+    /// `1 N / stiffness`: a rigid object.
+    Hertz { stiffness: f64 },
+}
+
+impl ContactLaw {
+    /// The tangent stiffness (N/m) at a normal force `force` (N).
+    fn tangent_stiffness(self, force: f64) -> f64 {
+        match self {
+            ContactLaw::Linear { stiffness } => stiffness,
+            ContactLaw::Hertz { stiffness } => 1.5 * stiffness * force.max(1.0).cbrt(),
+        }
+    }
+}
+
+/// An object the skin can touch.
 #[derive(Clone, Debug)]
 pub(crate) struct ObjectSetup {
-    /// Position of the surface along x, from the skin's position at time zero.
+    /// Distance along the surface's normal from the skin's position at time zero to the
+    /// surface.
     pub surface: f64,
-    pub stiffness: f64,
+    /// Angle of the surface's normal from x, towards y (rad).
+    pub tilt: f64,
+    pub law: ContactLaw,
+    /// Hunt-Crossley damping (s/m).
     pub damping: f64,
+    /// `(share, time constant)` of a viscoelastic relaxation (linear contacts only).
+    pub relaxation: Option<(f64, f64)>,
     /// `(mass, kinetic friction, static friction)` for an object that can slide.
     pub movable: Option<(f64, f64, f64)>,
 }
 
-/// The obstacle the arm (proximal link) can strike along x.
+/// The body of the finger an obstacle or a disturbance strikes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Struck {
+    /// Link 1, the proximal link (the arm body, where the controller acts).
+    Link1,
+    /// Link 2, the distal link, below the force sensor.
+    Link2,
+    /// The fingertip's housing (the carrier), above the force sensor.
+    Tip,
+}
+
+impl Struck {
+    /// The body's name in traces' metadata and reports.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Struck::Link1 => "link1",
+            Struck::Link2 => "link2",
+            Struck::Tip => "tip",
+        }
+    }
+}
+
+/// The obstacle a link can strike along x.
 #[derive(Clone, Debug)]
 pub(crate) struct ObstacleSetup {
-    /// Position of the obstacle along x, from the arm's position at time zero.
+    /// Position of the obstacle along x, from the struck body's position at time zero.
     pub position: f64,
     pub stiffness: f64,
     pub damping: f64,
+    /// Link 1 or link 2.
+    pub body: Struck,
 }
 
 /// The shape of a disturbance force.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) enum DisturbanceKind {
-    /// Half-sine pulse.
+    /// A tap: a half-sine pulse.
     Impulse { peak: f64, duration: f64 },
-    /// Sine burst starting at phase zero.
+    /// A sine burst starting at phase zero.
     Vibration {
         amplitude: f64,
         frequency: f64,
@@ -90,43 +151,13 @@ pub(crate) enum DisturbanceKind {
     },
 }
 
-/// The body a disturbance strikes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Struck {
-    /// The proximal link (the arm body, where the controller acts).
-    Arm,
-    /// The distal link, below the force sensor.
-    Distal,
-}
-
-/// A disturbance force on one of the finger's links.
+/// A disturbance force on one of the finger's bodies.
 #[derive(Clone, Debug)]
 pub(crate) struct DisturbanceSetup {
     pub start: f64,
     pub kind: DisturbanceKind,
     pub direction: f64,
     pub body: Struck,
-}
-
-impl DisturbanceSetup {
-    fn duration(&self) -> f64 {
-        match self.kind {
-            DisturbanceKind::Impulse { duration, .. } => duration,
-            DisturbanceKind::Vibration { duration, .. } => duration,
-        }
-    }
-
-    /// Signed force magnitude `tau` seconds after the start.
-    fn force(&self, tau: f64) -> f64 {
-        match self.kind {
-            DisturbanceKind::Impulse { peak, duration } => peak * (PI * tau / duration).sin(),
-            DisturbanceKind::Vibration {
-                amplitude,
-                frequency,
-                ..
-            } => amplitude * (TAU * frequency * tau).sin(),
-        }
-    }
 }
 
 /// Everything one run needs.
@@ -142,7 +173,8 @@ pub(crate) struct Setup {
     pub rate_hz: f64,
     /// Internal steps per output sample.
     pub oversampling: usize,
-    pub controller_rate_hz: f64,
+    /// The rate of the controller's context messages (and of its trajectory's ticks).
+    pub context_rate_hz: f64,
 }
 
 /// What the physical event was.
@@ -156,226 +188,111 @@ pub(crate) enum Happened {
 /// The sampled channels (in [`CHANNELS`] order) and the physical onset.
 pub(crate) struct Output {
     pub channels: Vec<Vec<f64>>,
-    /// First internal instant at which an event force was non-zero.
-    pub onset: Option<(f64, Happened)>,
+    /// The first integration step at which an event force was non-zero.
+    pub onset: Option<(u64, Happened)>,
+}
+
+/// The stiffest mode of a run's mechanics (rad/s) and the internal rate (Hz) it needs:
+/// every mode advances at most [`MAX_PHASE_STEP`] per step, and the explicitly integrated
+/// damping of a link on an obstacle stays well inside its stability bound.
+pub(crate) fn required_rate(
+    p: &Plant,
+    object: Option<&ObjectSetup>,
+    obstacle: Option<&ObstacleSetup>,
+) -> (f64, f64) {
+    let distal = p.distal_mass + p.carrier_mass;
+    // The largest normal force a contact reaches: twice the drive's limit.
+    let pressing = 2.0 * p.force_limit;
+    let contact = object.map_or(0.0, |o| {
+        o.law.tangent_stiffness(pressing) + p.tangential_stiffness
+    });
+    let mut omega = [
+        ((p.foam_stiffness + contact) / p.skin_mass).sqrt(),
+        TAU * p.link_frequency,
+    ]
+    .into_iter()
+    .fold(0.0, f64::max);
+    let mut rate: f64 = MIN_INTERNAL_RATE_HZ;
+    if let Some(o) = obstacle {
+        let m = match o.body {
+            Struck::Link1 => p.arm_mass,
+            _ => distal,
+        };
+        omega = omega.max((o.stiffness / m).sqrt());
+        // Hunt-Crossley damping is `damping x force` N s/m: keep its step below 0.5.
+        let impact = FASTEST_APPROACH * (o.stiffness * (p.arm_mass + distal)).sqrt();
+        rate = rate.max(2.0 * o.damping * impact.max(pressing) / m);
+    }
+    (omega, rate.max(omega / MAX_PHASE_STEP))
 }
 
 /// The ADC of one analog channel.
 struct Adc {
     lsb: f64,
+    /// 1 / lsb.
+    per_lsb: f64,
     gain: f64,
     offset: f64,
     drift: f64,
-    hum: f64,
-    /// cos and sin of the hum's phase on this channel.
-    hum_phase: (f64, f64),
+    /// Amplitude of the hum's fundamental, second and third harmonic.
+    hum: [f64; 3],
+    /// cos and sin of each hum component's phase on this channel.
+    hum_phase: [(f64, f64); 3],
     sigma: f64,
 }
 
 impl Adc {
-    fn new(channel: usize, gain: f64, offset: f64, drift: f64, s: &Sensors, phase: f64) -> Adc {
+    fn new<R: Rng>(
+        channel: usize,
+        (gain, offset, drift): (f64, f64, f64),
+        s: &Sensors,
+        noise: &mut R,
+    ) -> Adc {
         let (full_scale, noise_rms) = CHANNELS[channel]
             .adc
             .map_or((1.0, 0.0), |a| (a.full_scale, a.noise_rms));
         let lsb = 2.0 * full_scale / 4096.0;
+        let hum = s.hum_lsb * lsb;
         Adc {
             lsb,
+            per_lsb: 1.0 / lsb,
             gain,
             offset,
             drift,
-            hum: s.hum_lsb * lsb,
-            hum_phase: (phase.cos(), phase.sin()),
+            hum: [hum, hum * s.hum_harmonic2, hum * s.hum_harmonic3],
+            hum_phase: std::array::from_fn(|_| {
+                let phase = noise.random::<f64>() * TAU;
+                (phase.cos(), phase.sin())
+            }),
             sigma: noise_rms * s.noise_scale,
         }
     }
 
-    /// Converts `v` at time `t`; `mains` is (cos, sin) of the mains phase, `z` a standard
-    /// normal deviate.
+    /// Converts `v` at time `t`; `mains` holds (cos, sin) of the mains phase and of its
+    /// double and triple, `z` is a standard normal deviate.
     #[inline]
-    fn convert(&self, v: f64, t: f64, mains: (f64, f64), z: f64) -> f64 {
-        // sin(mains + phase)
-        let hum = mains.1 * self.hum_phase.0 + mains.0 * self.hum_phase.1;
-        let y = self.gain * v + self.offset + self.drift * t + self.hum * hum + self.sigma * z;
+    fn convert(&self, v: f64, t: f64, mains: &[(f64, f64); 3], z: f64) -> f64 {
+        let mut hum = 0.0;
+        for ((a, (pc, ps)), (mc, ms)) in self.hum.iter().zip(&self.hum_phase).zip(mains) {
+            // sin(k mains + phase)
+            hum += a * (ms * pc + mc * ps);
+        }
+        let y = self.gain * v + self.offset + self.drift * t + hum + self.sigma * z;
         // Adding zero turns a negative zero into a positive one.
-        (y / self.lsb).round().clamp(-2048.0, 2047.0) * self.lsb + 0.0
+        round(y * self.per_lsb).clamp(-2048.0, 2047.0) * self.lsb + 0.0
     }
 }
 
-/// Standard normal deviates by Marsaglia's polar method (two per accepted pair).
-struct Gauss {
-    spare: Option<f64>,
-}
-
-impl Gauss {
-    fn next<R: Rng>(&mut self, rng: &mut R) -> f64 {
-        if let Some(z) = self.spare.take() {
-            return z;
-        }
-        loop {
-            let u = 2.0 * rng.random::<f64>() - 1.0;
-            let v = 2.0 * rng.random::<f64>() - 1.0;
-            let q = u * u + v * v;
-            // Accepts about 79 % of pairs; q > 0 keeps the logarithm finite.
-            if q > 0.0 && q < 1.0 {
-                let k = (-2.0 * q.ln() / q).sqrt();
-                self.spare = Some(v * k);
-                return u * k;
-            }
-        }
-    }
-}
-
-/// A spring and a damper in parallel.
-#[derive(Clone, Copy, Debug)]
-struct SpringDamper {
-    stiffness: f64,
-    damping: f64,
-}
-
-impl SpringDamper {
-    /// The force for an extension `dx` and an extension rate `dv`.
-    fn force(&self, dx: f64, dv: f64) -> f64 {
-        self.stiffness * dx + self.damping * dv
-    }
-}
-
-/// The three-body chain's coefficients, derived once from the plant's parameters.
-struct Chain {
-    arm_mass: f64,
-    /// The distal link and the carrier, rigid through the stiff force sensor.
-    distal_mass: f64,
-    skin_mass: f64,
-    /// The whole finger, arm to skin.
-    total_mass: f64,
-    /// The structural compliance between the arm and the distal body (its mode at the
-    /// plant's link frequency).
-    link: SpringDamper,
-    /// The foam between the distal body and the skin: normal (x) and shear (y).
-    foam: [SpringDamper; 2],
-    arm_coulomb_friction: f64,
-    arm_viscous_friction: f64,
-}
-
-impl Chain {
-    fn new(p: &Plant) -> Chain {
-        let ma = p.arm_mass;
-        let md = p.distal_mass + p.carrier_mass;
-        let ms = p.skin_mass;
-        let m_tip = md + ms;
-        let m_tot = ma + m_tip;
-        // Foam.
-        let kf = p.foam_stiffness;
-        let cf = 2.0 * p.foam_damping_ratio * (kf * ms).sqrt();
-        let kfy = kf * p.foam_shear_ratio;
-        let cfy = 2.0 * p.foam_damping_ratio * (kfy * ms).sqrt();
-        // Structural mode: arm against the distal body and skin.
-        let mu = ma * m_tip / m_tot;
-        let wl = TAU * p.link_frequency;
-        let kl = mu * wl * wl;
-        let cl = 2.0 * p.link_damping_ratio * mu * wl;
-        Chain {
-            arm_mass: ma,
-            distal_mass: md,
-            skin_mass: ms,
-            total_mass: m_tot,
-            link: SpringDamper {
-                stiffness: kl,
-                damping: cl,
-            },
-            foam: [
-                SpringDamper {
-                    stiffness: kf,
-                    damping: cf,
-                },
-                SpringDamper {
-                    stiffness: kfy,
-                    damping: cfy,
-                },
-            ],
-            arm_coulomb_friction: p.arm_coulomb_friction,
-            arm_viscous_friction: p.arm_viscous_friction,
-        }
-    }
-
-    /// The drive's friction force at arm velocity `v`: Coulomb (regularized below
-    /// [`FRICTION_SPEED`]) plus viscous.
-    fn friction(&self, v: f64) -> f64 {
-        self.arm_coulomb_friction * (v / FRICTION_SPEED).clamp(-1.0, 1.0)
-            + self.arm_viscous_friction * v
-    }
-}
-
-/// The forces from outside the chain on one axis's bodies.
-struct Loads {
-    /// The drive's force on the arm: controller, ripple and friction.
-    drive: f64,
-    /// The obstacle's force pushing the arm back.
-    obstacle: f64,
-    /// A disturbance striking the arm (the proximal link).
-    knock: f64,
-    /// A disturbance striking the distal body.
-    disturbance: f64,
-    /// The object's force on the skin.
-    object: f64,
-}
-
-/// The accelerations of one axis's bodies, and the foam's force on the skin.
-struct Accelerations {
-    arm: f64,
-    distal: f64,
-    skin: f64,
-    foam_force: f64,
-}
-
-/// State of one axis of the three-body chain.
-#[derive(Clone, Copy, Debug, Default)]
-struct Axis {
-    xa: f64,
-    va: f64,
-    xd: f64,
-    vd: f64,
-    xs: f64,
-    vs: f64,
-}
-
-impl Axis {
-    /// Steady motion at velocity `v`, all springs relaxed, lagging the command by `lag`.
-    fn start(v: f64, lag: f64) -> Axis {
-        Axis {
-            xa: -lag,
-            va: v,
-            xd: -lag,
-            vd: v,
-            xs: -lag,
-            vs: v,
-        }
-    }
-
-    /// Newton's law for the three bodies: the link and the foam (`foam`, this axis's) pull
-    /// them together, the `loads` act from outside.
-    fn accelerations(&self, chain: &Chain, foam: &SpringDamper, loads: &Loads) -> Accelerations {
-        let fl = chain.link.force(self.xa - self.xd, self.va - self.vd);
-        let ff = foam.force(self.xd - self.xs, self.vd - self.vs);
-        Accelerations {
-            arm: (loads.drive - fl - loads.obstacle + loads.knock) / chain.arm_mass,
-            distal: (fl - ff + loads.disturbance) / chain.distal_mass,
-            skin: (ff + loads.object) / chain.skin_mass,
-            foam_force: ff,
-        }
-    }
-
-    /// One semi-implicit Euler step: velocities first, positions with the new ones.
-    fn integrate(&mut self, a: &Accelerations, dt: f64) {
-        self.va += a.arm * dt;
-        self.vd += a.distal * dt;
-        self.vs += a.skin * dt;
-        self.xa += self.va * dt;
-        self.xd += self.vd * dt;
-        self.xs += self.vs * dt;
-    }
+/// `x` rounded to the nearest integer (ties to even), for |x| < 2^51: one addition and one
+/// subtraction instead of a call into the C library.
+#[inline]
+fn round(x: f64) -> f64 {
+    const SHIFT: f64 = 6_755_399_441_055_744.0; // 1.5 x 2^52
+    (x + SHIFT) - SHIFT
 }
 
 /// A unit phasor `(cos, sin)` turned by a fixed step at each [`Phasor::rotate`].
+#[derive(Clone, Copy, Debug)]
 struct Phasor {
     cos: f64,
     sin: f64,
@@ -387,11 +304,12 @@ impl Phasor {
     /// The step of a phasor that stands still.
     const STILL: (f64, f64) = (0.0, 1.0);
 
-    /// At phase zero, turning by `step` radians.
-    fn new(step: f64) -> Phasor {
+    /// At phase `angle`, turning by `step` radians.
+    fn new(angle: f64, step: f64) -> Phasor {
+        let (sin, cos) = angle.sin_cos();
         Phasor {
-            cos: 1.0,
-            sin: 0.0,
+            cos,
+            sin,
             step: step.sin_cos(),
         }
     }
@@ -401,9 +319,10 @@ impl Phasor {
         (self.cos, self.sin) = (self.cos * dc - self.sin * ds, self.sin * dc + self.cos * ds);
     }
 
-    /// Brings the magnitude back to one (rounding makes it wander).
+    /// Brings the magnitude back to one (rounding makes it wander; the magnitude stays far
+    /// from overflow, so no `hypot`).
     fn normalize(&mut self) {
-        let norm = self.cos.hypot(self.sin);
+        let norm = (self.cos * self.cos + self.sin * self.sin).sqrt();
         self.cos /= norm;
         self.sin /= norm;
     }
@@ -422,9 +341,9 @@ struct DriveRipple {
 }
 
 impl DriveRipple {
-    /// Follows the commanded velocity `v` (at a controller tick).
+    /// Follows the commanded velocity `v` (at a joint-loop tick).
     fn follow(&mut self, v: [f64; 2]) {
-        let speed = v[0].hypot(v[1]);
+        let speed = (v[0] * v[0] + v[1] * v[1]).sqrt();
         if speed > 1e-9 && self.amplitude > 0.0 {
             self.direction = [v[0] / speed, v[1] / speed];
             let step_angle = TAU * speed * self.dt / self.pitch;
@@ -446,106 +365,244 @@ impl DriveRipple {
 
 /// The tip position the controller measures: the arm's, quantized by the encoders.
 fn encoder(x: f64) -> f64 {
-    (x / ENCODER_RESOLUTION).round() * ENCODER_RESOLUTION
+    round(x / ENCODER_RESOLUTION) * ENCODER_RESOLUTION
 }
 
-/// The robot's position controller: a PD law with feedforward of the commanded
-/// acceleration, run at its own rate; its force and context are held between ticks.
-struct Controller {
+/// The integration step at or after time `t` of a clock at `internal_rate` (Hz).
+fn step_at(t: f64, internal_rate: f64) -> u64 {
+    (t * internal_rate - 1e-6).ceil().max(0.0) as u64
+}
+
+/// The positions and velocities of the three bodies, x and y.
+#[derive(Clone, Copy, Debug)]
+struct Bodies {
+    xa: [f64; 2],
+    va: [f64; 2],
+    xd: [f64; 2],
+    vd: [f64; 2],
+    xs: [f64; 2],
+    vs: [f64; 2],
+}
+
+/// The chain's coefficients, derived once from the plant's parameters.
+struct Chain {
+    arm_mass: f64,
+    /// Link 2 and the carrier, rigid through the stiff force sensor.
+    distal_mass: f64,
+    skin_mass: f64,
+    /// The whole finger, link 1 to skin.
     total_mass: f64,
-    kp: f64,
-    kd: f64,
-    /// The tick period.
-    period: f64,
-    internal_rate: f64,
-    /// The force on the arm, x and y.
-    force: [f64; 2],
-    /// The context it sends: position error, commanded velocity and acceleration (x, y).
-    context: [f64; 6],
-    tick: u64,
-    /// The integration step of the next tick.
-    next_tick: u64,
+    /// Stiffness and damping of the distal structure's bending (link 1 to link 2).
+    link: (f64, f64),
+    /// Stiffness and damping of the foam, normal (x) and shear (y).
+    foam_k: [f64; 2],
+    foam_c: [f64; 2],
+    coulomb: f64,
+    viscous: f64,
 }
 
-impl Controller {
-    fn new(p: &Plant, total_mass: f64, rate_hz: f64, internal_rate: f64) -> Controller {
-        let wc = TAU * p.control_bandwidth;
-        Controller {
-            total_mass,
-            kp: total_mass * wc * wc,
-            kd: 2.0 * p.control_damping_ratio * total_mass * wc,
-            period: 1.0 / rate_hz,
-            internal_rate,
-            force: [0.0; 2],
-            context: [0.0; 6],
-            tick: 0,
-            next_tick: 0,
+impl Chain {
+    fn new(p: &Plant) -> Chain {
+        let ma = p.arm_mass;
+        let md = p.distal_mass + p.carrier_mass;
+        let ms = p.skin_mass;
+        let m_tip = md + ms;
+        let m_tot = ma + m_tip;
+        let foam_k = [p.foam_stiffness, p.foam_stiffness * p.foam_shear_ratio];
+        // The bending mode: link 1 against link 2, fingertip and skin.
+        let mu = ma * m_tip / m_tot;
+        let wl = TAU * p.link_frequency;
+        Chain {
+            arm_mass: ma,
+            distal_mass: md,
+            skin_mass: ms,
+            total_mass: m_tot,
+            link: (mu * wl * wl, 2.0 * p.link_damping_ratio * mu * wl),
+            foam_k,
+            foam_c: foam_k.map(|k| 2.0 * p.foam_damping_ratio * (k * ms).sqrt()),
+            coulomb: p.arm_coulomb_friction,
+            viscous: p.arm_viscous_friction,
         }
     }
 
+    /// The drive's friction force at velocity `v`: Coulomb (regularized below
+    /// [`FRICTION_SPEED`]) plus viscous.
+    fn friction(&self, v: f64) -> f64 {
+        self.coulomb * (v / FRICTION_SPEED).clamp(-1.0, 1.0) + self.viscous * v
+    }
+}
+
+/// The digital joint controller: a PD law on the motor-side position with feedforward of
+/// the commanded acceleration (through an erring mass model) and of part of the friction,
+/// run at its loop rate, its force limited and held between ticks.
+struct Controller {
+    /// The mass the feedforward assumes.
+    model_mass: f64,
+    kp: f64,
+    kd: f64,
+    /// The compensated Coulomb and viscous friction.
+    compensation: (f64, f64),
+    limit: f64,
+    rate: f64,
+    internal_rate: f64,
+    /// The force on link 1, x and y.
+    force: [f64; 2],
+    tick: u64,
+    /// The integration step of the next tick.
+    next_step: u64,
+}
+
+impl Controller {
+    fn new(p: &Plant, chain: &Chain, internal_rate: f64) -> Controller {
+        let m = chain.total_mass;
+        let wc = TAU * p.control_bandwidth;
+        let share = p.friction_compensation;
+        Controller {
+            model_mass: m * (1.0 + p.feedforward_error),
+            kp: m * wc * wc,
+            kd: 2.0 * p.control_damping_ratio * m * wc,
+            compensation: (share * chain.coulomb, share * chain.viscous),
+            limit: p.force_limit,
+            rate: p.control_rate,
+            internal_rate,
+            force: [0.0; 2],
+            tick: 0,
+            next_step: 0,
+        }
+    }
+
+    /// The friction the controller compensates at commanded velocity `v`.
+    fn compensated(&self, v: f64) -> f64 {
+        self.compensation.0 * (v / FRICTION_SPEED).clamp(-1.0, 1.0) + self.compensation.1 * v
+    }
+
     /// Runs the tick due at integration step `i`, if any: reads the command and the
-    /// encoders, updates the force and the context, and retunes the drive `ripple`.
+    /// encoders, updates the force, and retunes the drive `ripple`.
     fn update(
         &mut self,
         i: u64,
         trajectory: &mut Trajectory,
-        axes: &[Axis; 2],
+        b: &Bodies,
         ripple: &mut DriveRipple,
     ) {
-        if i != self.next_tick {
+        if i != self.next_step {
             return;
         }
-        let cmd = trajectory.at(self.tick);
-        let measured = [encoder(axes[0].xa), encoder(axes[1].xa)];
+        let cmd = trajectory.at_time(self.tick as f64 / self.rate);
         self.force = std::array::from_fn(|k| {
-            self.total_mass * cmd.a[k]
-                + self.kp * (cmd.p[k] - measured[k])
-                + self.kd * (cmd.v[k] - axes[k].va)
+            let f = self.model_mass * cmd.a[k]
+                + self.compensated(cmd.v[k])
+                + self.kp * (cmd.p[k] - encoder(b.xa[k]))
+                + self.kd * (cmd.v[k] - b.va[k]);
+            f.clamp(-self.limit, self.limit)
         });
-        self.context = [
-            cmd.p[0] - measured[0],
-            cmd.p[1] - measured[1],
+        ripple.follow(cmd.v);
+        self.tick += 1;
+        self.next_step = step_at(self.tick as f64 / self.rate, self.internal_rate);
+    }
+}
+
+/// The controller's context messages: computed at its context rate (the trajectory's
+/// ticks) and received by the fingertip a latency later, held until the next arrives.
+struct ContextLink {
+    rate: f64,
+    latency: f64,
+    internal_rate: f64,
+    tick: u64,
+    next_step: u64,
+    /// Messages sent and not yet received: the step they arrive at, and their values.
+    in_flight: VecDeque<(u64, [f64; 6])>,
+    /// What the fingertip last received: position error, commanded velocity and
+    /// acceleration (x, y), as sent (rounded to 1e-9 of their unit).
+    received: [f64; 6],
+}
+
+impl ContextLink {
+    /// The message of context tick `tick`, the finger being at `b`.
+    fn message(&self, tick: u64, trajectory: &mut Trajectory, b: &Bodies) -> [f64; 6] {
+        let cmd = trajectory.at(tick);
+        [
+            cmd.p[0] - encoder(b.xa[0]),
+            cmd.p[1] - encoder(b.xa[1]),
             cmd.v[0],
             cmd.v[1],
             cmd.a[0],
             cmd.a[1],
-        ];
-        ripple.follow(cmd.v);
-        self.tick += 1;
-        self.next_tick = (self.tick as f64 * self.period * self.internal_rate - 1e-6).ceil() as u64;
+        ]
+    }
+
+    /// Sends the message due at step `i`, if any, and receives those that arrive.
+    fn update(&mut self, i: u64, trajectory: &mut Trajectory, b: &Bodies) {
+        if i == self.next_step {
+            let t = self.tick as f64 / self.rate;
+            let values = self.message(self.tick, trajectory, b);
+            self.in_flight
+                .push_back((step_at(t + self.latency, self.internal_rate), values));
+            self.tick += 1;
+            self.next_step = step_at(self.tick as f64 / self.rate, self.internal_rate);
+        }
+        while let Some(&(arrives, values)) = self.in_flight.front() {
+            if arrives > i {
+                break;
+            }
+            self.received = values.map(round_context);
+            self.in_flight.pop_front();
+        }
     }
 }
 
-/// The disturbance's force on the distal body, x and y.
-struct Disturbance<'a> {
-    setup: &'a DisturbanceSetup,
+/// A disturbance's force: a half sine or a sine burst, from a phasor turned each step.
+struct Disturbance {
+    start: f64,
     end: f64,
+    amplitude: f64,
+    /// Angular frequency (rad/s).
+    omega: f64,
+    dt: f64,
+    phasor: Option<Phasor>,
     /// Cosine and sine of its direction.
     direction: (f64, f64),
+    body: Struck,
 }
 
-impl Disturbance<'_> {
-    fn new(setup: &DisturbanceSetup) -> Disturbance<'_> {
+impl Disturbance {
+    fn new(setup: &DisturbanceSetup, dt: f64) -> Disturbance {
+        let (amplitude, omega, duration) = match setup.kind {
+            DisturbanceKind::Impulse { peak, duration } => (peak, PI / duration, duration),
+            DisturbanceKind::Vibration {
+                amplitude,
+                frequency,
+                duration,
+            } => (amplitude, TAU * frequency, duration),
+        };
         Disturbance {
-            setup,
-            end: setup.start + setup.duration(),
+            start: setup.start,
+            end: setup.start + duration,
+            amplitude,
+            omega,
+            dt,
+            phasor: None,
             direction: (setup.direction.cos(), setup.direction.sin()),
+            body: setup.body,
         }
     }
 
-    /// The force at time `t`.
-    fn force(&self, t: f64) -> [f64; 2] {
-        if t >= self.setup.start && t < self.end {
-            let f = self.setup.force(t - self.setup.start);
-            [f * self.direction.0, f * self.direction.1]
-        } else {
-            [0.0; 2]
+    /// The force at time `t` (called once per step, in order).
+    fn force(&mut self, t: f64) -> [f64; 2] {
+        if t < self.start || t >= self.end {
+            return [0.0; 2];
         }
+        let phasor = self.phasor.get_or_insert_with(|| {
+            Phasor::new(self.omega * (t - self.start), self.omega * self.dt)
+        });
+        let f = self.amplitude * phasor.sin;
+        phasor.rotate();
+        [f * self.direction.0, f * self.direction.1]
     }
 }
 
-/// A Hunt-Crossley contact force at penetration `depth` and penetration rate `velocity`:
-/// zero out of contact, and never pulling.
+/// A Hunt-Crossley force at penetration `depth` and penetration rate `velocity`: zero out
+/// of contact, and never pulling.
 fn hunt_crossley(stiffness: f64, damping: f64, depth: f64, velocity: f64) -> f64 {
     if depth > 0.0 {
         (stiffness * depth * (1.0 + damping * velocity)).max(0.0)
@@ -554,83 +611,141 @@ fn hunt_crossley(stiffness: f64, damping: f64, depth: f64, velocity: f64) -> f64
     }
 }
 
-/// The obstacle the arm strikes along x.
-struct ArmObstacle<'a> {
+/// The obstacle a link strikes along x.
+struct Obstacle<'a> {
     setup: &'a ObstacleSetup,
-    /// Its position in the arm's coordinates.
+    /// Its position in the struck body's coordinates.
     position: f64,
 }
 
-impl ArmObstacle<'_> {
-    /// The force pushing the arm back.
-    fn force(&self, arm: &Axis) -> f64 {
+impl Obstacle<'_> {
+    /// The force pushing the struck body back, from its x position and velocity.
+    fn force(&self, b: &Bodies) -> f64 {
+        let (x, v) = match self.setup.body {
+            Struck::Link1 => (b.xa[0], b.va[0]),
+            _ => (b.xd[0], b.vd[0]),
+        };
         hunt_crossley(
             self.setup.stiffness,
             self.setup.damping,
-            arm.xa - self.position,
-            arm.va,
+            x - self.position,
+            v,
         )
     }
 }
 
-/// The skin's contact with the object: a normal force along x, a stick-slip friction along
-/// y (a spring anchored on the object that slides when it would exceed the friction
-/// limit), and a movable object's own motion on its table.
-struct ObjectContact<'a> {
+/// The skin's contact with an object: a normal force along the surface's normal `n`
+/// (elastic, relaxing, and damped implicitly), a stick-slip friction along its tangent
+/// `t` (a spring anchored on the object that slides when it would exceed the friction
+/// limit), and a movable object's own motion on its table along `n`.
+struct Contact<'a> {
     setup: &'a ObjectSetup,
-    /// The surface's position at time zero, in the skin's coordinates.
+    n: [f64; 2],
+    t: [f64; 2],
+    /// The surface's position along `n` at time zero.
     surface: f64,
-    /// The movable object's displacement and velocity along x.
+    /// The movable object's displacement and velocity along `n`.
     position: f64,
     velocity: f64,
     /// Static friction holds the movable object.
     stuck: bool,
-    /// The skin's y position at which the friction spring is relaxed.
+    /// The skin's tangential position at which the friction spring is relaxed.
     anchor: f64,
     in_contact: bool,
+    /// The relaxing (Maxwell) part of the elastic force, the relaxing stiffness, its decay
+    /// per step, and the depth at the previous step.
+    relaxing: f64,
+    relaxing_stiffness: f64,
+    decay: f64,
+    last_depth: f64,
+    /// The contact's elastic stiffness, less the relaxing part, or Hertz's K.
+    stiffness: f64,
 }
 
-impl ObjectContact<'_> {
-    fn new(setup: &ObjectSetup, skin: f64) -> ObjectContact<'_> {
-        ObjectContact {
+/// What the contact does to the skin in one step.
+struct ContactForces {
+    /// Normal force magnitude (N, pushing the skin back along -n).
+    normal: f64,
+    /// Friction along t (N).
+    friction: f64,
+}
+
+impl Contact<'_> {
+    fn new(setup: &ObjectSetup, skin: [f64; 2], dt: f64) -> Contact<'_> {
+        let (s, c) = setup.tilt.sin_cos();
+        let n = [c, s];
+        let (stiffness, relaxing_stiffness, decay) = match (setup.law, setup.relaxation) {
+            (ContactLaw::Linear { stiffness }, Some((share, tau))) => (
+                stiffness * (1.0 - share),
+                stiffness * share,
+                (-dt / tau).exp(),
+            ),
+            (ContactLaw::Linear { stiffness }, None) => (stiffness, 0.0, 0.0),
+            // K = k^1.5 / sqrt(1 N): the force is 1 N at a depth of 1 N / k.
+            (ContactLaw::Hertz { stiffness }, _) => (stiffness.powf(1.5), 0.0, 0.0),
+        };
+        Contact {
             setup,
-            surface: setup.surface + skin,
+            n,
+            t: [-s, c],
+            surface: setup.surface + n[0] * skin[0] + n[1] * skin[1],
             position: 0.0,
             velocity: 0.0,
             stuck: true,
             anchor: 0.0,
             in_contact: false,
+            relaxing: 0.0,
+            relaxing_stiffness,
+            decay,
+            last_depth: 0.0,
+            stiffness,
         }
     }
 
-    /// The normal force (pushing the skin back along x) and the friction force on the skin
-    /// (along y).
-    fn forces(&mut self, axes: &[Axis; 2], p: &Plant) -> (f64, f64) {
-        let (x, y) = (&axes[0], &axes[1]);
-        let depth = x.xs - (self.surface + self.position);
-        let f_n = hunt_crossley(
-            self.setup.stiffness,
-            self.setup.damping,
-            depth,
-            x.vs - self.velocity,
-        );
-        let mut f_t = 0.0;
-        if f_n > 0.0 {
-            if !self.in_contact {
-                self.anchor = y.xs;
-                self.in_contact = true;
-            }
-            let limit = p.skin_friction * f_n / p.tangential_stiffness;
-            let mut e = y.xs - self.anchor;
-            if e.abs() > limit {
-                e = limit.copysign(e);
-                self.anchor = y.xs - e;
-            }
-            f_t = -p.tangential_stiffness * e;
-        } else {
+    /// The contact's forces on the skin this step. `free` is the skin's velocity at the
+    /// end of the step without the normal force (the other forces applied), `gain` the
+    /// integration step over the skin's mass: the damping acts on the velocity the step
+    /// ends with, so that it stays stable however stiff the contact.
+    fn forces(&mut self, b: &Bodies, free: [f64; 2], gain: f64, p: &Plant) -> ContactForces {
+        let n = self.n;
+        let depth = n[0] * b.xs[0] + n[1] * b.xs[1] - (self.surface + self.position);
+        let reached = depth.max(0.0);
+        self.relaxing =
+            self.relaxing * self.decay + self.relaxing_stiffness * (reached - self.last_depth);
+        self.last_depth = reached;
+        if depth <= 0.0 {
             self.in_contact = false;
+            return ContactForces {
+                normal: 0.0,
+                friction: 0.0,
+            };
         }
-        (f_n, f_t)
+        let elastic = match self.setup.law {
+            ContactLaw::Linear { .. } => (self.stiffness * depth + self.relaxing).max(0.0),
+            ContactLaw::Hertz { .. } => self.stiffness * depth * depth.sqrt(),
+        };
+        // Hunt-Crossley: elastic x (1 + damping x depth rate), the rate taken at the end of
+        // the step (implicit), never pulling.
+        let b_n = self.setup.damping * elastic;
+        let g = gain * b_n;
+        let rate_free = n[0] * free[0] + n[1] * free[1] - self.velocity;
+        let rate = (rate_free - gain * elastic) / (1.0 + g);
+        let normal = (elastic + b_n * rate).max(0.0);
+        let tangential = self.t[0] * b.xs[0] + self.t[1] * b.xs[1];
+        if !self.in_contact {
+            self.anchor = tangential;
+            self.in_contact = true;
+        }
+        let limit = p.skin_friction * normal / p.tangential_stiffness;
+        let mut e = tangential - self.anchor;
+        if e.abs() > limit {
+            e = limit.copysign(e);
+            self.anchor = tangential - e;
+        }
+        ContactForces {
+            normal,
+            friction: -p.tangential_stiffness * e,
+        }
     }
 
     /// One step of a movable object under the normal force `f_n`: it breaks free when
@@ -670,114 +785,114 @@ fn event(f_n: f64, f_ob: f64, disturbance: [f64; 2]) -> Option<Happened> {
     }
 }
 
+/// What the fingertip's sensors transduce in one step.
+struct Physical {
+    /// The load above the force sensor, x and y (N).
+    load: [f64; 2],
+    /// The skin's acceleration, x and y (m/s^2).
+    skin: [f64; 2],
+    /// The contact force pressing the pad, along x (N).
+    pressing: f64,
+    /// The foam's force on the skin along x (N).
+    foam: f64,
+}
+
 /// The fingertip's sensors and their anti-alias filters at the internal rate, and the ADCs
 /// sampling them at the detector rate.
 struct SensorChain {
-    carrier_mass: f64,
-    accel_cross_axis: f64,
+    /// cos and sin of the force sensor's misalignment, and its cross-axis sensitivities.
+    force_axes: (f64, f64),
+    force_cross: [f64; 2],
+    /// cos and sin of the accelerometer's misalignment, and its cross-axis sensitivity.
+    accel_axis: (f64, f64),
+    accel_cross: f64,
     stress_crosstalk: f64,
     internal_rate: f64,
     rate_hz: f64,
     oversampling: usize,
     /// The accelerometer's AC coupling.
     highpass: HighPass1,
-    anti_alias: [AntiAliasFilter; 4],
+    anti_alias: AntiAliasFilter<4>,
     adc: [Adc; 4],
-    gauss: Gauss,
     /// The mains phase, advanced once per output sample.
     mains: Phasor,
-    /// The normal contact force and the foam's x force at the previous step.
+    /// The pressing force and the foam's x force at the previous step.
     previous: (f64, f64),
     /// Integration steps until the next sample.
     until_sample: usize,
 }
 
 impl SensorChain {
-    /// Draws the hum's phase on each channel from `noise`.
-    fn new<R: Rng>(
-        s: &Sensors,
-        carrier_mass: f64,
-        rate_hz: f64,
-        oversampling: usize,
-        noise: &mut R,
-    ) -> SensorChain {
+    /// Draws the hum's phases on each channel from `noise`.
+    fn new<R: Rng>(s: &Sensors, rate_hz: f64, oversampling: usize, noise: &mut R) -> SensorChain {
         let internal_rate = rate_hz * oversampling as f64;
-        let anti_alias = std::array::from_fn(|_| AntiAliasFilter::new(internal_rate, rate_hz));
-        let highpass = HighPass1::new(s.accel_highpass, internal_rate);
         let adc = [
             Adc::new(
                 0,
-                s.force_x_gain,
-                s.force_x_offset,
-                s.force_x_drift,
+                (s.force_x_gain, s.force_x_offset, s.force_x_drift),
                 s,
-                noise.random::<f64>() * TAU,
+                noise,
             ),
             Adc::new(
                 1,
-                s.force_y_gain,
-                s.force_y_offset,
-                s.force_y_drift,
+                (s.force_y_gain, s.force_y_offset, s.force_y_drift),
                 s,
-                noise.random::<f64>() * TAU,
+                noise,
             ),
-            Adc::new(
-                2,
-                s.accel_gain,
-                s.accel_offset,
-                s.accel_drift,
-                s,
-                noise.random::<f64>() * TAU,
-            ),
+            Adc::new(2, (s.accel_gain, s.accel_offset, s.accel_drift), s, noise),
             Adc::new(
                 3,
-                s.stress_gain,
-                s.stress_offset,
-                s.stress_drift,
+                (s.stress_gain, s.stress_offset, s.stress_drift),
                 s,
-                noise.random::<f64>() * TAU,
+                noise,
             ),
         ];
+        let (fs, fc) = s.force_misalignment.sin_cos();
+        let (as_, ac) = s.accel_misalignment.sin_cos();
         SensorChain {
-            carrier_mass,
-            accel_cross_axis: s.accel_cross_axis,
+            force_axes: (fc, fs),
+            force_cross: [s.force_x_cross_axis, s.force_y_cross_axis],
+            accel_axis: (ac, as_),
+            accel_cross: s.accel_cross_axis,
             stress_crosstalk: s.stress_crosstalk,
             internal_rate,
             rate_hz,
             oversampling,
-            highpass,
-            anti_alias,
+            highpass: HighPass1::new(s.accel_highpass, internal_rate),
+            anti_alias: AntiAliasFilter::new(internal_rate, rate_hz),
             adc,
-            gauss: Gauss { spare: None },
-            mains: Phasor::new(TAU * s.hum_frequency / rate_hz),
+            mains: Phasor::new(0.0, TAU * s.hum_frequency / rate_hz),
             previous: (0.0, 0.0),
             until_sample: 0,
         }
     }
 
-    /// The analog signals of one step (force x and y, skin acceleration, stress rate) from
-    /// the axes' accelerations and the normal contact force `f_n`.
-    fn transduce(&mut self, axes: &[Accelerations; 2], f_n: f64) -> [f64; 4] {
-        let (x, y) = (&axes[0], &axes[1]);
-        let force_x = -self.carrier_mass * x.distal - x.foam_force;
-        let force_y = -self.carrier_mass * y.distal - y.foam_force;
-        let accel = self
-            .highpass
-            .process(x.skin + self.accel_cross_axis * y.skin);
-        let (prev_fn, prev_ff) = self.previous;
-        let stress = (f_n - prev_fn) * self.internal_rate
-            + self.stress_crosstalk * (x.foam_force - prev_ff) * self.internal_rate;
-        self.previous = (f_n, x.foam_force);
-        [force_x, force_y, accel, stress]
+    /// The analog signals of one step: force x and y, skin acceleration, stress rate.
+    fn transduce(&mut self, ph: &Physical) -> [f64; 4] {
+        let (c, s) = self.force_axes;
+        let [lx, ly] = ph.load;
+        let (fx, fy) = (c * lx + s * ly, c * ly - s * lx);
+        let (ac, as_) = self.accel_axis;
+        let [sx, sy] = ph.skin;
+        let along = ac * sx + as_ * sy;
+        let across = ac * sy - as_ * sx;
+        let accel = self.highpass.process(along + self.accel_cross * across);
+        let (prev_p, prev_f) = self.previous;
+        let stress = ((ph.pressing - prev_p) + self.stress_crosstalk * (ph.foam - prev_f))
+            * self.internal_rate;
+        self.previous = (ph.pressing, ph.foam);
+        [
+            fx + self.force_cross[0] * fy,
+            fy + self.force_cross[1] * fx,
+            accel,
+            stress,
+        ]
     }
 
     /// Filters the `analog` signals of integration step `i` and, on a sampling step,
     /// returns the ADCs' readings.
     fn sample<R: Rng>(&mut self, i: u64, analog: [f64; 4], noise: &mut R) -> Option<[f64; 4]> {
-        let mut filtered = [0.0; 4];
-        for ((y, filter), v) in filtered.iter_mut().zip(&mut self.anti_alias).zip(analog) {
-            *y = filter.process(v);
-        }
+        let filtered = self.anti_alias.process(analog);
         let readings = (self.until_sample == 0).then(|| {
             self.until_sample = self.oversampling;
             self.convert(i / self.oversampling as u64, filtered, noise)
@@ -789,11 +904,13 @@ impl SensorChain {
     /// The ADCs' readings of output row `row`.
     fn convert<R: Rng>(&mut self, row: u64, filtered: [f64; 4], noise: &mut R) -> [f64; 4] {
         let ts = row as f64 / self.rate_hz;
-        let mains = (self.mains.cos, self.mains.sin);
+        let (c, s) = (self.mains.cos, self.mains.sin);
+        let (c2, s2) = (c * c - s * s, 2.0 * s * c);
+        let mains = [(c, s), (c2, s2), (c * c2 - s * s2, s * c2 + c * s2)];
         let mut readings = [0.0; 4];
         for ((r, adc), y) in readings.iter_mut().zip(&self.adc).zip(filtered) {
-            let z = self.gauss.next(noise);
-            *r = adc.convert(y, ts, mains, z);
+            let z: f64 = noise.sample(StandardNormal);
+            *r = adc.convert(y, ts, &mains, z);
         }
         self.mains.rotate();
         if row.is_multiple_of(1024) {
@@ -811,93 +928,151 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let dt = 1.0 / internal_rate;
 
     let chain = Chain::new(p);
-    let mut controller =
-        Controller::new(p, chain.total_mass, setup.controller_rate_hz, internal_rate);
-    let mut sensors =
-        SensorChain::new(&setup.sensors, p.carrier_mass, setup.rate_hz, n_over, noise);
+    let mut controller = Controller::new(p, &chain, internal_rate);
+    let mut context = ContextLink {
+        rate: setup.context_rate_hz,
+        latency: p.context_latency,
+        internal_rate,
+        tick: 0,
+        next_step: 0,
+        in_flight: VecDeque::new(),
+        received: [0.0; 6],
+    };
+    let mut sensors = SensorChain::new(&setup.sensors, setup.rate_hz, n_over, noise);
 
     // Initial state: steady motion at the commanded initial velocity, all springs relaxed,
-    // the whole finger lagging the command by the position error that balances friction.
+    // the whole finger lagging the command by the position error that balances the
+    // friction the controller leaves uncompensated.
     let c0 = setup.trajectory.at(0);
-    let mut axes: [Axis; 2] =
-        std::array::from_fn(|k| Axis::start(c0.v[k], chain.friction(c0.v[k]) / controller.kp));
-    let mut contact = setup
-        .object
-        .as_ref()
-        .map(|o| ObjectContact::new(o, axes[0].xs));
-    let obstacle = setup.obstacle.as_ref().map(|o| ArmObstacle {
-        setup: o,
-        position: o.position + axes[0].xa,
+    let lag: [f64; 2] = std::array::from_fn(|k| {
+        (chain.friction(c0.v[k]) - controller.compensated(c0.v[k])) / controller.kp
     });
-    let disturbance = setup.disturbance.as_ref().map(Disturbance::new);
+    let start: [f64; 2] = std::array::from_fn(|k| -lag[k]);
+    let mut b = Bodies {
+        xa: start,
+        va: c0.v,
+        xd: start,
+        vd: c0.v,
+        xs: start,
+        vs: c0.v,
+    };
+    // The motion was steady before time zero: the fingertip holds the message of then.
+    context.received = context
+        .message(0, &mut setup.trajectory, &b)
+        .map(round_context);
+    let mut contact = setup.object.as_ref().map(|o| Contact::new(o, b.xs, dt));
+    let obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
+        setup: o,
+        position: o.position + start[0],
+    });
+    let mut disturbance = setup.disturbance.as_ref().map(|d| Disturbance::new(d, dt));
     let mut ripple = DriveRipple {
         amplitude: p.drive_ripple,
         pitch: p.ripple_pitch,
         dt,
-        phasor: Phasor::new(0.0),
+        phasor: Phasor::new(0.0, 0.0),
         direction: [0.0; 2],
     };
+    let (inv_ma, inv_md, ms) = (
+        1.0 / chain.arm_mass,
+        1.0 / chain.distal_mass,
+        chain.skin_mass,
+    );
+    let inv_ms = 1.0 / ms;
+    let carrier = p.carrier_mass;
 
-    let mut onset: Option<(f64, Happened)> = None;
+    let mut onset: Option<(u64, Happened)> = None;
     let mut out: Vec<Vec<f64>> = (0..CHANNELS.len())
         .map(|_| Vec::with_capacity(setup.rows))
         .collect();
     let total_steps = (setup.rows.saturating_sub(1) * n_over) as u64;
 
-    for i in 0..=total_steps {
+    // An exclusive range: an inclusive one checks its end twice per step.
+    for i in 0..total_steps + 1 {
         let t = i as f64 * dt;
-
-        controller.update(i, &mut setup.trajectory, &axes, &mut ripple);
+        controller.update(i, &mut setup.trajectory, &b, &mut ripple);
+        context.update(i, &mut setup.trajectory, &b);
         let ripple_force = ripple.force();
-        let f_d = disturbance.as_ref().map_or([0.0; 2], |d| d.force(t));
-        let (f_n, f_t) = contact.as_mut().map_or((0.0, 0.0), |c| c.forces(&axes, p));
-        let f_ob = obstacle.as_ref().map_or(0.0, |o| o.force(&axes[0]));
+        // The outside forces on each body, x and y: the disturbance on the body it strikes,
+        // the obstacle along x.
+        let mut on_arm = [0.0; 2];
+        let mut on_distal = [0.0; 2];
+        let mut on_tip = [0.0; 2];
+        let f_d = match disturbance.as_mut() {
+            Some(d) => {
+                let f = d.force(t);
+                match d.body {
+                    Struck::Link1 => on_arm = f,
+                    Struck::Link2 => on_distal = f,
+                    Struck::Tip => on_tip = f,
+                }
+                f
+            }
+            None => [0.0; 2],
+        };
+        let f_ob = match obstacle.as_ref() {
+            Some(o) => {
+                let f = o.force(&b);
+                match o.setup.body {
+                    Struck::Link1 => on_arm[0] -= f,
+                    _ => on_distal[0] -= f,
+                }
+                f
+            }
+            None => 0.0,
+        };
+
+        // Both axes at once, the same arithmetic lane by lane.
+        let (kl, cl) = chain.link;
+        let link: [f64; 2] =
+            std::array::from_fn(|k| kl * (b.xa[k] - b.xd[k]) + cl * (b.va[k] - b.vd[k]));
+        let foam: [f64; 2] = std::array::from_fn(|k| {
+            chain.foam_k[k] * (b.xd[k] - b.xs[k]) + chain.foam_c[k] * (b.vd[k] - b.vs[k])
+        });
+        let a_arm: [f64; 2] = std::array::from_fn(|k| {
+            let drive = controller.force[k] + ripple_force[k] - chain.friction(b.va[k]);
+            (drive - link[k] + on_arm[k]) * inv_ma
+        });
+        let a_d: [f64; 2] =
+            std::array::from_fn(|k| (link[k] - foam[k] + on_distal[k] + on_tip[k]) * inv_md);
+        // The skin: foam and friction explicit, the contact's normal force implicit in its
+        // damping.
+        let (f_n, f_t, n, tn) = match contact.as_mut() {
+            Some(c) => {
+                let free: [f64; 2] = std::array::from_fn(|k| b.vs[k] + dt * foam[k] / ms);
+                let f = c.forces(&b, free, dt / ms, p);
+                (f.normal, f.friction, c.n, c.t)
+            }
+            None => (0.0, 0.0, [1.0, 0.0], [0.0, 1.0]),
+        };
+        let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) * inv_ms);
         if onset.is_none() {
-            onset = event(f_n, f_ob, f_d).map(|h| (t, h));
+            onset = event(f_n, f_ob, f_d).map(|h| (i, h));
         }
 
-        let drive = |k: usize| -> f64 {
-            controller.force[k] + ripple_force[k] - chain.friction(axes[k].va)
+        let physical = Physical {
+            load: std::array::from_fn(|k| -carrier * a_d[k] - foam[k] + on_tip[k]),
+            skin: a_s,
+            pressing: f_n * n[0] - f_t * tn[0],
+            foam: foam[0],
         };
-        let on_arm = disturbance
-            .as_ref()
-            .is_some_and(|d| d.setup.body == Struck::Arm);
-        let (knock, f_d) = if on_arm {
-            (f_d, [0.0; 2])
-        } else {
-            ([0.0; 2], f_d)
-        };
-        let loads = [
-            Loads {
-                drive: drive(0),
-                obstacle: f_ob,
-                knock: knock[0],
-                disturbance: f_d[0],
-                object: -f_n,
-            },
-            Loads {
-                drive: drive(1),
-                obstacle: 0.0,
-                knock: knock[1],
-                disturbance: f_d[1],
-                object: f_t,
-            },
-        ];
-        let accelerations: [Accelerations; 2] =
-            std::array::from_fn(|k| axes[k].accelerations(&chain, &chain.foam[k], &loads[k]));
-
-        let analog = sensors.transduce(&accelerations, f_n);
+        let analog = sensors.transduce(&physical);
         if let Some(readings) = sensors.sample(i, analog, noise) {
             for (column, v) in out.iter_mut().zip(readings) {
                 column.push(v);
             }
-            for (column, v) in out[4..].iter_mut().zip(controller.context) {
-                column.push(round_context(v));
+            for (column, v) in out[4..].iter_mut().zip(context.received) {
+                column.push(v);
             }
         }
 
-        for (axis, a) in axes.iter_mut().zip(&accelerations) {
-            axis.integrate(a, dt);
+        for k in 0..2 {
+            b.va[k] += a_arm[k] * dt;
+            b.vd[k] += a_d[k] * dt;
+            b.vs[k] += a_s[k] * dt;
+            b.xa[k] += b.va[k] * dt;
+            b.xd[k] += b.vd[k] * dt;
+            b.xs[k] += b.vs[k] * dt;
         }
         if let Some(c) = &mut contact {
             c.slide(f_n, dt);
@@ -912,5 +1087,293 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
 /// Context values are sent with a resolution of 1e-9 of their unit (they are the
 /// controller's own numbers; this only drops floating-point dust such as 1e-20 m).
 fn round_context(v: f64) -> f64 {
-    (v * 1e9).round() / 1e9 + 0.0
+    round(v * 1e9) / 1e9 + 0.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn object(law: ContactLaw, tilt: f64, relaxation: Option<(f64, f64)>) -> ObjectSetup {
+        ObjectSetup {
+            surface: 0.0,
+            tilt,
+            law,
+            damping: 0.0,
+            relaxation,
+            movable: None,
+        }
+    }
+
+    /// A skin at `x` moving at `v`, everything else at rest.
+    fn skin_at(x: [f64; 2], v: [f64; 2]) -> Bodies {
+        Bodies {
+            xa: [0.0; 2],
+            va: [0.0; 2],
+            xd: [0.0; 2],
+            vd: [0.0; 2],
+            xs: x,
+            vs: v,
+        }
+    }
+
+    /// A rigid object's force grows as depth^1.5 and is 1 N at 1 N / stiffness; a soft
+    /// one's is stiffness x depth.
+    #[test]
+    fn hertz_and_linear_contact_laws() {
+        let p = Plant::nominal();
+        let k = 50_000.0;
+        let hertz = object(ContactLaw::Hertz { stiffness: k }, 0.0, None);
+        let force = |setup: &ObjectSetup, depth: f64| {
+            let mut c = Contact::new(setup, [0.0; 2], 1e-5);
+            let b = skin_at([depth, 0.0], [0.0; 2]);
+            c.forces(&b, [0.0; 2], 0.0, &p).normal
+        };
+        assert!((force(&hertz, 1.0 / k) - 1.0).abs() < 1e-9);
+        let ratio = force(&hertz, 4.0 / k) / force(&hertz, 1.0 / k);
+        assert!((ratio - 8.0).abs() < 1e-9, "{ratio}");
+        assert_eq!(force(&hertz, -1e-6), 0.0);
+        let linear = object(ContactLaw::Linear { stiffness: 2000.0 }, 0.0, None);
+        assert!((force(&linear, 1e-3) - 2.0).abs() < 1e-12);
+        // The tangent stiffness the internal rate is chosen from: 1.5 x secant, growing as
+        // the force's cube root.
+        let h = ContactLaw::Hertz { stiffness: k };
+        assert!((h.tangent_stiffness(8.0) / h.tangent_stiffness(1.0) - 2.0).abs() < 1e-12);
+    }
+
+    /// Held at a constant depth, a relaxing object's force falls from stiffness x depth to
+    /// (1 - share) of it with the relaxation's time constant.
+    #[test]
+    fn viscoelastic_relaxation() {
+        let p = Plant::nominal();
+        let (share, tau, dt) = (0.4, 0.05, 1e-4);
+        let setup = object(
+            ContactLaw::Linear { stiffness: 1000.0 },
+            0.0,
+            Some((share, tau)),
+        );
+        let mut c = Contact::new(&setup, [0.0; 2], dt);
+        let b = skin_at([1e-3, 0.0], [0.0; 2]);
+        let mut at = |steps: usize| {
+            let mut f = 0.0;
+            for _ in 0..steps {
+                f = c.forces(&b, [0.0; 2], 0.0, &p).normal;
+            }
+            f
+        };
+        assert!((at(1) - 1.0).abs() < 1e-9, "the whole stiffness at first");
+        let after_tau = at((tau / dt) as usize);
+        let expected = 1.0 - share * (1.0 - (-1.0f64).exp());
+        assert!(
+            (after_tau - expected).abs() < 0.01,
+            "{after_tau} vs {expected}"
+        );
+        let relaxed = at((10.0 * tau / dt) as usize);
+        assert!((relaxed - (1.0 - share)).abs() < 1e-3, "{relaxed}");
+    }
+
+    /// On a tilted surface the depth is measured along its normal, and the friction acts
+    /// along its tangent, up to mu x normal force.
+    #[test]
+    fn tilted_surface_turns_the_contact() {
+        let p = Plant::nominal();
+        let tilt = 0.2;
+        let setup = object(ContactLaw::Linear { stiffness: 1000.0 }, tilt, None);
+        let mut c = Contact::new(&setup, [0.0; 2], 1e-5);
+        // 1 mm into the surface along its normal.
+        let n = [tilt.cos(), tilt.sin()];
+        let b = skin_at([1e-3 * n[0], 1e-3 * n[1]], [0.0; 2]);
+        let f = c.forces(&b, [0.0; 2], 0.0, &p);
+        assert!((f.normal - 1.0).abs() < 1e-9, "{}", f.normal);
+        assert_eq!(f.friction, 0.0, "stuck where it touched");
+        // Slid far along the tangent: friction at its limit, against the slide.
+        let t = [-tilt.sin(), tilt.cos()];
+        let slid = skin_at([b.xs[0] + 0.01 * t[0], b.xs[1] + 0.01 * t[1]], [0.0; 2]);
+        let f = c.forces(&slid, [0.0; 2], 0.0, &p);
+        assert!(
+            (f.friction + p.skin_friction * f.normal).abs() < 1e-9,
+            "{}",
+            f.friction
+        );
+    }
+
+    /// A stiff, strongly damped contact on a light skin, integrated at a coarse step:
+    /// explicitly its damping would overshoot by far (damping x step / mass = 40), the
+    /// implicit step settles, never pulling.
+    #[test]
+    fn implicit_contact_damping_is_stable() {
+        let p = Plant::nominal();
+        let mut setup = object(ContactLaw::Linear { stiffness: 3000.0 }, 0.0, None);
+        setup.damping = 80.0;
+        let (dt, m) = (1e-4, 0.002);
+        let mut c = Contact::new(&setup, [0.0; 2], dt);
+        // Pressed by 10 N: elastic force 10 N at 3.3 mm, damping 80 x 10 = 800 N s/m.
+        let push = 10.0;
+        let (mut x, mut v) = (0.0, 0.05);
+        let mut forces = Vec::new();
+        for _ in 0..2000 {
+            let b = skin_at([x, 0.0], [v, 0.0]);
+            let free = [v + dt * push / m, 0.0];
+            let f = c.forces(&b, free, dt / m, &p).normal;
+            assert!(f >= 0.0);
+            v += dt * (push - f) / m;
+            x += v * dt;
+            forces.push(f);
+        }
+        let last = &forces[forces.len() - 100..];
+        for f in last {
+            assert!((f - push).abs() < 0.01, "settles at the push: {f}");
+        }
+    }
+
+    /// The controller's force: feedforward through its erring mass model, the compensated
+    /// share of friction, PD, limited.
+    #[test]
+    fn controller_feeds_forward_compensates_and_limits() {
+        let mut p = Plant::nominal();
+        p.feedforward_error = 0.1;
+        p.friction_compensation = 0.5;
+        p.force_limit = 3.0;
+        let chain = Chain::new(&p);
+        let mut c = Controller::new(&p, &chain, 20_000.0);
+        let mut tr = Trajectory::new(0.001, [0.02, 0.0]);
+        tr.set_accel(0, [1.0, 0.0]);
+        let b = Bodies {
+            xa: [0.0; 2],
+            va: [0.02, 0.0],
+            xd: [0.0; 2],
+            vd: [0.0; 2],
+            xs: [0.0; 2],
+            vs: [0.0; 2],
+        };
+        let mut ripple = DriveRipple {
+            amplitude: 0.0,
+            pitch: 1e-3,
+            dt: 5e-5,
+            phasor: Phasor::new(0.0, 0.0),
+            direction: [0.0; 2],
+        };
+        c.update(0, &mut tr, &b, &mut ripple);
+        let expected = 1.1 * chain.total_mass * 1.0
+            + 0.5 * (p.arm_coulomb_friction + p.arm_viscous_friction * 0.02);
+        assert!(
+            (c.force[0] - expected).abs() < 1e-12,
+            "{} vs {expected}",
+            c.force[0]
+        );
+        // Far behind its command, it pushes at its limit only.
+        let behind = Bodies {
+            xa: [-0.01, 0.0],
+            ..b
+        };
+        c.next_step = 1;
+        c.update(1, &mut tr, &behind, &mut ripple);
+        assert_eq!(c.force[0], 3.0);
+    }
+
+    /// The force sensor turned by its misalignment and crossed by its cross-axis
+    /// sensitivity; the accelerometer likewise; the hum with its harmonics.
+    #[test]
+    fn sensor_chain_misalignment_cross_axis_and_hum() {
+        let mut s = Sensors::nominal();
+        s.force_misalignment = 0.05;
+        s.force_y_cross_axis = 0.02;
+        s.accel_misalignment = -0.04;
+        s.accel_cross_axis = 0.0;
+        s.accel_highpass = 0.001;
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1);
+        let mut chain = SensorChain::new(&s, 5000.0, 4, &mut rng);
+        let analog = chain.transduce(&Physical {
+            load: [1.0, 0.0],
+            skin: [0.0, 10.0],
+            pressing: 0.0,
+            foam: 0.0,
+        });
+        let (x, y) = (0.05f64.cos(), -(0.05f64.sin()));
+        assert!((analog[0] - x).abs() < 1e-12);
+        assert!((analog[1] - (y + 0.02 * x)).abs() < 1e-12);
+        // The accelerometer's axis, turned by -0.04 rad, reads -sin(0.04) of y.
+        assert!(
+            (analog[2] - 10.0 * (-0.04f64).sin()).abs() < 1e-3,
+            "{}",
+            analog[2]
+        );
+        // A second harmonic of the mains: sin(2 theta + phase).
+        let adc = Adc {
+            lsb: 1e-3,
+            per_lsb: 1e3,
+            gain: 1.0,
+            offset: 0.0,
+            drift: 0.0,
+            hum: [0.0, 1.0, 0.0],
+            hum_phase: [(1.0, 0.0); 3],
+            sigma: 0.0,
+        };
+        let theta: f64 = 0.3;
+        let mains = [
+            (theta.cos(), theta.sin()),
+            ((2.0 * theta).cos(), (2.0 * theta).sin()),
+            ((3.0 * theta).cos(), (3.0 * theta).sin()),
+        ];
+        let v = adc.convert(0.0, 0.0, &mains, 0.0);
+        assert!((v - (2.0 * theta).sin()).abs() < 1e-3, "{v}");
+    }
+
+    /// The joint loop ticks at its own rate, on the first step at or after each tick's time:
+    /// at 1.5 kHz on a 20 kHz clock, 13 or 14 steps apart, 1,500 ticks a second.
+    #[test]
+    fn joint_loop_ticks_at_its_rate() {
+        let mut p = Plant::nominal();
+        p.control_rate = 1500.0;
+        let chain = Chain::new(&p);
+        let mut c = Controller::new(&p, &chain, 20_000.0);
+        let mut tr = Trajectory::new(0.001, [0.01, 0.0]);
+        let b = skin_at([0.0; 2], [0.0; 2]);
+        let mut ripple = DriveRipple {
+            amplitude: 0.0,
+            pitch: 1e-3,
+            dt: 5e-5,
+            phasor: Phasor::new(0.0, 0.0),
+            direction: [0.0; 2],
+        };
+        let mut ticks = Vec::new();
+        for i in 0..20_000 {
+            let before = c.tick;
+            c.update(i, &mut tr, &b, &mut ripple);
+            if c.tick > before {
+                ticks.push(i);
+            }
+        }
+        assert_eq!(ticks.len(), 1500);
+        assert!(ticks.windows(2).all(|w| (13..=14).contains(&(w[1] - w[0]))));
+        assert_eq!(ticks[3], 40, "tick 3 at 2 ms");
+    }
+
+    /// The context reaches the fingertip a latency after the controller sent it.
+    #[test]
+    fn context_arrives_after_its_latency() {
+        let internal = 20_000.0;
+        let mut link = ContextLink {
+            rate: 1000.0,
+            latency: 0.0005,
+            internal_rate: internal,
+            tick: 0,
+            next_step: 0,
+            in_flight: VecDeque::new(),
+            received: [0.0; 6],
+        };
+        let mut tr = Trajectory::new(0.001, [0.0; 2]);
+        tr.set_accel(3, [2.0, 0.0]);
+        let b = skin_at([0.0; 2], [0.0; 2]);
+        let mut arrived = None;
+        for i in 0..200 {
+            link.update(i, &mut tr, &b);
+            if link.received[4] != 0.0 && arrived.is_none() {
+                arrived = Some(i);
+            }
+        }
+        // Sent at 3 ms (step 60), received 0.5 ms (10 steps) later.
+        assert_eq!(arrived, Some(70));
+    }
 }

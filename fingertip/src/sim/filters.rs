@@ -14,7 +14,8 @@ use std::f64::consts::PI;
 /// aliases onto DC) by about 42 dB.
 pub const ANTI_ALIAS_CUTOFF_RATIO: f64 = 0.3;
 
-/// A second-order IIR section in transposed direct form II.
+/// The coefficients of a second-order IIR section (transposed direct form II), normalized
+/// by `a0`.
 #[derive(Clone, Copy, Debug)]
 struct Biquad {
     b0: f64,
@@ -22,8 +23,6 @@ struct Biquad {
     b2: f64,
     a1: f64,
     a2: f64,
-    s1: f64,
-    s2: f64,
 }
 
 impl Biquad {
@@ -41,61 +40,65 @@ impl Biquad {
             b2: b1 / 2.0,
             a1: -2.0 * cos / a0,
             a2: (1.0 - alpha) / a0,
-            s1: 0.0,
-            s2: 0.0,
         }
-    }
-
-    #[inline]
-    fn process(&mut self, x: f64) -> f64 {
-        let y = self.b0 * x + self.s1;
-        self.s1 = self.b1 * x - self.a1 * y + self.s2;
-        self.s2 = self.b2 * x - self.a2 * y;
-        y
-    }
-
-    /// Sets the state to the steady state for a constant input `x`.
-    fn settle(&mut self, x: f64) {
-        // In steady state y = x (unit DC gain); solve the state equations for s1, s2.
-        self.s2 = self.b2 * x - self.a2 * x;
-        self.s1 = self.b1 * x - self.a1 * x + self.s2;
     }
 }
 
 /// The anti-alias filter: a 4th-order Butterworth low-pass (two biquad sections) run at
 /// the internal rate, with its cutoff at [`ANTI_ALIAS_CUTOFF_RATIO`] times the output rate.
+/// It filters `L` channels at once (the simulator's four analog channels share one
+/// filter design), lane by lane, so that the channels' arithmetic runs side by side.
 #[derive(Clone, Debug)]
-pub struct AntiAliasFilter {
-    s: [Biquad; 2],
+pub struct AntiAliasFilter<const L: usize = 1> {
+    sections: [Biquad; 2],
+    /// Each section's two state variables, per lane.
+    s1: [[f64; L]; 2],
+    s2: [[f64; L]; 2],
 }
 
-impl AntiAliasFilter {
+impl<const L: usize> AntiAliasFilter<L> {
     /// A filter running at `input_rate_hz` for sampling at `output_rate_hz`.
-    pub fn new(input_rate_hz: f64, output_rate_hz: f64) -> AntiAliasFilter {
+    pub fn new(input_rate_hz: f64, output_rate_hz: f64) -> AntiAliasFilter<L> {
         let fc = ANTI_ALIAS_CUTOFF_RATIO * output_rate_hz;
         // Quality factors of the 4th-order Butterworth sections: 1 / (2 cos(pi/8)) and
         // 1 / (2 cos(3 pi/8)).
         let q1 = 1.0 / (2.0 * (PI / 8.0).cos());
         let q2 = 1.0 / (2.0 * (3.0 * PI / 8.0).cos());
         AntiAliasFilter {
-            s: [
+            sections: [
                 Biquad::low_pass(fc, input_rate_hz, q1),
                 Biquad::low_pass(fc, input_rate_hz, q2),
             ],
+            s1: [[0.0; L]; 2],
+            s2: [[0.0; L]; 2],
         }
     }
 
-    /// Filters one input sample.
+    /// Filters one input sample per lane.
     #[inline]
-    pub fn process(&mut self, x: f64) -> f64 {
-        let y = self.s[0].process(x);
-        self.s[1].process(y)
+    pub fn process(&mut self, x: [f64; L]) -> [f64; L] {
+        let mut v = x;
+        for (k, c) in self.sections.iter().enumerate() {
+            let (s1, s2) = (&mut self.s1[k], &mut self.s2[k]);
+            for lane in 0..L {
+                let y = c.b0 * v[lane] + s1[lane];
+                s1[lane] = c.b1 * v[lane] - c.a1 * y + s2[lane];
+                s2[lane] = c.b2 * v[lane] - c.a2 * y;
+                v[lane] = y;
+            }
+        }
+        v
     }
 
-    /// Puts the filter in the steady state of a constant input.
-    pub fn settle(&mut self, x: f64) {
-        self.s[0].settle(x);
-        self.s[1].settle(x);
+    /// Puts every lane in the steady state of its constant input `x`.
+    pub fn settle(&mut self, x: [f64; L]) {
+        // In steady state y = x (unit DC gain); solve the state equations for s1, s2.
+        for (k, c) in self.sections.iter().enumerate() {
+            for ((s1, s2), x) in self.s1[k].iter_mut().zip(&mut self.s2[k]).zip(x) {
+                *s2 = c.b2 * x - c.a2 * x;
+                *s1 = c.b1 * x - c.a1 * x + *s2;
+            }
+        }
     }
 }
 
@@ -135,12 +138,12 @@ impl HighPass1 {
 /// channel before the ADC. A `factor` of 0 is treated as 1.
 pub fn decimate(input: &[f64], input_rate_hz: f64, factor: usize) -> Vec<f64> {
     let factor = factor.max(1);
-    let mut f = AntiAliasFilter::new(input_rate_hz, input_rate_hz / factor as f64);
+    let mut f = AntiAliasFilter::<1>::new(input_rate_hz, input_rate_hz / factor as f64);
     input
         .iter()
         .enumerate()
         .filter_map(|(i, &x)| {
-            let y = f.process(x);
+            let [y] = f.process([x]);
             (i % factor == 0).then_some(y)
         })
         .collect()
@@ -151,11 +154,11 @@ mod tests {
     use super::*;
 
     fn tone_gain(freq: f64, fs: f64, fc_rate: f64) -> f64 {
-        let mut f = AntiAliasFilter::new(fs, fc_rate);
+        let mut f = AntiAliasFilter::<1>::new(fs, fc_rate);
         let n = (fs * 0.2) as usize;
         let mut peak: f64 = 0.0;
         for i in 0..n {
-            let y = f.process((2.0 * PI * freq * i as f64 / fs).sin());
+            let [y] = f.process([(2.0 * PI * freq * i as f64 / fs).sin()]);
             if i > n / 2 {
                 peak = peak.max(y.abs());
             }
@@ -175,12 +178,28 @@ mod tests {
         assert!(g < 0.01, "{g}");
     }
 
+    /// Lanes share the design, not the state: each is the one-lane filter of its input.
+    #[test]
+    fn lanes_filter_independently() {
+        let mut four = AntiAliasFilter::<4>::new(50_000.0, 5000.0);
+        let mut ones: [AntiAliasFilter; 4] =
+            std::array::from_fn(|_| AntiAliasFilter::new(50_000.0, 5000.0));
+        for i in 0..500 {
+            let x: [f64; 4] = std::array::from_fn(|k| ((i * (k + 1)) as f64 * 0.37).sin());
+            let y = four.process(x);
+            for k in 0..4 {
+                assert_eq!(y[k], ones[k].process([x[k]])[0]);
+            }
+        }
+    }
+
     #[test]
     fn settle_gives_steady_output() {
-        let mut f = AntiAliasFilter::new(50_000.0, 5000.0);
-        f.settle(3.5);
+        let mut f = AntiAliasFilter::<2>::new(50_000.0, 5000.0);
+        f.settle([3.5, -1.0]);
         for _ in 0..10 {
-            assert!((f.process(3.5) - 3.5).abs() < 1e-9);
+            let [a, b] = f.process([3.5, -1.0]);
+            assert!((a - 3.5).abs() < 1e-9 && (b + 1.0).abs() < 1e-9);
         }
     }
 

@@ -5,8 +5,9 @@
 //! format, with the ten input channels of [`CHANNELS`], a `phase` column (`approach`) and a
 //! `truth` column (the expected event's name from its physical onset on).
 //!
-//! - The physics is integrated at an internal rate of at least 50 kHz (an integer multiple
-//!   of the detector rate) and every analog channel passes an anti-alias filter
+//! - The physics is integrated at an internal rate chosen per run from its stiffest mode
+//!   (an integer multiple of the detector rate, at least twice it and at least
+//!   [`MIN_INTERNAL_RATE_HZ`]) and every analog channel passes an anti-alias filter
 //!   ([`filters`]) before it is sampled at the detector rate (5 kHz by default).
 //! - Nominal runs (`randomize: false`) use the nominal parameters of [`params`]; only the
 //!   sensor noise and hum phases depend on the seed. Randomized runs draw every parameter
@@ -23,11 +24,12 @@ mod trajectory;
 
 use crate::trace::{Labels, Trace, TraceError};
 use engine::{
-    DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup, Struck,
+    ContactLaw, DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup,
+    Struck,
 };
 use params::{
-    Braking, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle, Plant, Sensors,
-    SmallDisturbance, SoftObject, SuddenAccel, VerySoftObject,
+    Braking, FirmSoftObject, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle,
+    Plant, Sensors, SmallDisturbance, SoftObject, SuddenAccel, Surface, VerySoftObject,
 };
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -46,9 +48,10 @@ pub const DISTURBANCE: &str = "disturbance";
 /// The phase every simulated row is in.
 pub const APPROACH: &str = "approach";
 
-/// The internal (integration) rate is the smallest multiple of the detector rate that is
-/// at least this, and at least 4 times the detector rate.
-pub const MIN_INTERNAL_RATE_HZ: f64 = 50_000.0;
+/// The internal (integration) rate is the smallest multiple of the detector rate that
+/// resolves the run's stiffest mode (at most 0.35 rad of its phase per step), and at least
+/// this and twice the detector rate: five steps per tick of the fastest joint loop.
+pub const MIN_INTERNAL_RATE_HZ: f64 = 10_000.0;
 /// The default detector rate.
 pub const DEFAULT_RATE_HZ: f64 = 5000.0;
 /// The default rate of the robot controller's ticks (context updates).
@@ -181,9 +184,9 @@ pub enum Scenario {
     ContactSoft2,
     /// Contact at 5 cm/s with an object that slides away on its table.
     ObjectMoves5,
-    /// The proximal link strikes an obstacle at 8 cm/s.
+    /// A link (link 1 nominally, either in randomized runs) strikes an obstacle at 8 cm/s.
     LinkCollision8,
-    /// The proximal link strikes an obstacle at 2 cm/s.
+    /// A link strikes an obstacle at 2 cm/s.
     LinkCollision2,
     /// A large disturbance while moving at 5 cm/s.
     DisturbanceLarge5,
@@ -193,17 +196,18 @@ pub enum Scenario {
     SuddenAccelStandstill,
     /// A sudden commanded acceleration while moving at 5 cm/s.
     SuddenAccelMoving5,
-    /// Contact with a hard or soft object while the finger brakes.
+    /// Contact with a hard or firm soft object while the finger brakes.
     ContactBraking,
     /// Contact with a very soft object at 1 cm/s.
     ContactVerySoft1,
     /// A large or small disturbance while cruising at 2 cm/s.
     DisturbanceSlow2,
-    /// A knock on the proximal link while moving at 5 cm/s.
+    /// A knock (tap or burst) on link 1, the proximal link, while moving at 5 cm/s.
     KnockLink1,
-    /// A knock on the distal link while moving at 5 cm/s.
+    /// A knock on link 2, the distal link, while moving at 5 cm/s.
     KnockLink2,
-    /// Random event-free motion (pauses and moves, sudden ones included), no contact.
+    /// Random event-free motion (pauses, moves, gentle velocity changes, sudden
+    /// accelerations), no contact.
     FreeMotion,
 }
 
@@ -224,6 +228,7 @@ enum Kind {
 enum ObjectKind {
     Hard,
     Soft,
+    FirmSoft,
     VerySoft,
     Movable,
 }
@@ -344,25 +349,25 @@ impl Scenario {
             Scenario::ContactSoft5 => "fingertip contacts a soft object at 5 cm/s",
             Scenario::ContactSoft2 => "fingertip contacts a soft object at 2 cm/s",
             Scenario::ObjectMoves5 => "fingertip contacts, at 5 cm/s, an object that slides away",
-            Scenario::LinkCollision8 => "proximal link strikes an obstacle at 8 cm/s",
-            Scenario::LinkCollision2 => "proximal link strikes an obstacle at 2 cm/s",
+            Scenario::LinkCollision8 => "link 1 or link 2 strikes an obstacle at 8 cm/s",
+            Scenario::LinkCollision2 => "link 1 or link 2 strikes an obstacle at 2 cm/s",
             Scenario::DisturbanceLarge5 => {
-                "large shock or vibration reaches the fingertip while moving at 5 cm/s"
+                "large tap or vibration burst on the tip, link 2 or link 1 while moving at 5 cm/s"
             }
             Scenario::DisturbanceSmall5 => {
-                "small shock or vibration reaches the fingertip while moving at 5 cm/s"
+                "small tap or vibration burst on the tip, link 2 or link 1 while moving at 5 cm/s"
             }
             Scenario::SuddenAccelStandstill => "sudden commanded acceleration from standstill",
             Scenario::SuddenAccelMoving5 => "sudden commanded acceleration while moving at 5 cm/s",
             Scenario::ContactBraking => {
-                "fingertip contacts a hard or soft object while braking from 5 cm/s"
+                "fingertip contacts a hard or firm soft object while braking from 5 cm/s"
             }
             Scenario::ContactVerySoft1 => "fingertip contacts a very soft object at 1 cm/s",
             Scenario::DisturbanceSlow2 => {
-                "large or small shock or vibration reaches the fingertip while moving at 2 cm/s"
+                "large or small tap or vibration burst on the finger while moving at 2 cm/s"
             }
-            Scenario::KnockLink1 => "the proximal link is knocked while moving at 5 cm/s",
-            Scenario::KnockLink2 => "the distal link is knocked while moving at 5 cm/s",
+            Scenario::KnockLink1 => "a tap or burst strikes link 1 while moving at 5 cm/s",
+            Scenario::KnockLink2 => "a tap or burst strikes link 2 while moving at 5 cm/s",
             Scenario::FreeMotion => "random event-free motion, touching nothing",
         }
     }
@@ -382,11 +387,196 @@ impl Scenario {
             Scenario::DisturbanceLarge5 => Kind::Disturbance(Size::Large),
             Scenario::DisturbanceSmall5 => Kind::Disturbance(Size::Small),
             Scenario::DisturbanceSlow2 => Kind::Disturbance(Size::Either),
-            Scenario::KnockLink1 => Kind::Knock(Struck::Arm),
-            Scenario::KnockLink2 => Kind::Knock(Struck::Distal),
+            Scenario::KnockLink1 => Kind::Knock(Struck::Link1),
+            Scenario::KnockLink2 => Kind::Knock(Struck::Link2),
             Scenario::SuddenAccelStandstill | Scenario::SuddenAccelMoving5 => Kind::SuddenAccel,
             Scenario::FreeMotion => Kind::Free,
         }
+    }
+}
+
+/// How `fingertip evaluate` splits a scenario's runs into bins of the parameter that
+/// matters most for detecting its event, so that a weak region shows instead of averaging
+/// away.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Binning {
+    /// The parameter each run is placed by (and plotted against), e.g. `object stiffness`.
+    pub parameter: &'static str,
+    /// Its unit.
+    pub unit: &'static str,
+    /// Whether it spans decades (log bins and a log axis).
+    pub log: bool,
+    /// The bins.
+    pub split: Split,
+}
+
+/// The bins of a [`Binning`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Split {
+    /// Ranges of the parameter between consecutive edges (ascending, in its unit); a value
+    /// beyond the outer edges counts in the outer bin.
+    Edges(&'static [f64]),
+    /// Kinds of run named in the trace's metadata (struck link, tap or burst and the body
+    /// struck), in this order.
+    Categories(&'static [&'static str]),
+}
+
+/// Where one run falls in its scenario's [`Binning`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunBin {
+    /// Its bin, an index into [`Binning::labels`].
+    pub bin: usize,
+    /// Its value of the binning parameter (in the binning's unit).
+    pub value: f64,
+}
+
+impl Binning {
+    /// Each bin's label: a range such as `1e+04-2.2e+04 N/m`, or a category.
+    pub fn labels(&self) -> Vec<String> {
+        match self.split {
+            Split::Edges(edges) => edges
+                .windows(2)
+                .map(|w| format!("{}-{} {}", short(w[0]), short(w[1]), self.unit))
+                .collect(),
+            Split::Categories(names) => names.iter().map(|n| n.to_string()).collect(),
+        }
+    }
+}
+
+/// Two significant digits, in scientific notation from 10,000 on.
+fn short(v: f64) -> String {
+    if v.abs() >= 1e4 {
+        format!("{v:.1e}")
+    } else if v.abs() >= 10.0 || v == v.round() {
+        format!("{v:.0}")
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+const STIFFNESS: &str = "object stiffness";
+const PEAK: &str = "peak force";
+const DISTURBANCE_CATEGORIES: &[&str] = &[
+    "tap on tip",
+    "tap on link2",
+    "tap on link1",
+    "burst on tip",
+    "burst on link2",
+    "burst on link1",
+];
+
+impl Scenario {
+    /// The parameter that matters most for detecting this scenario's event and its bins:
+    /// object stiffness for contacts (mass for a movable object), the struck link for
+    /// collisions (plotted against speed), tap or burst and the body struck for
+    /// disturbances (size and kind at 2 cm/s, kind for knocks; plotted against the peak
+    /// force), the acceleration for sudden accelerations. `None` for free motion.
+    pub fn binning(self) -> Option<Binning> {
+        let edges = |parameter, unit, log, edges| Binning {
+            parameter,
+            unit,
+            log,
+            split: Split::Edges(edges),
+        };
+        let categories = |parameter, unit, log, names| Binning {
+            parameter,
+            unit,
+            log,
+            split: Split::Categories(names),
+        };
+        Some(match self.kind() {
+            Kind::Contact(ObjectKind::Hard) => {
+                edges(STIFFNESS, "N/m", true, &[1e4, 2.15e4, 4.64e4, 1e5])
+            }
+            Kind::Contact(ObjectKind::Soft | ObjectKind::FirmSoft) => {
+                edges(STIFFNESS, "N/m", true, &[100.0, 300.0, 1000.0, 3000.0])
+            }
+            Kind::Contact(ObjectKind::VerySoft) => {
+                edges(STIFFNESS, "N/m", true, &[40.0, 70.0, 120.0])
+            }
+            Kind::Contact(ObjectKind::Movable) => {
+                edges("object mass", "kg", true, &[0.05, 0.1, 0.2, 0.5])
+            }
+            Kind::BrakingContact => edges(STIFFNESS, "N/m", true, &[1e3, 3e3, 3.16e4, 1e5]),
+            Kind::Collision => categories("speed", "m/s", false, &["link1", "link2"]),
+            Kind::Disturbance(Size::Either) => categories(
+                PEAK,
+                "N",
+                true,
+                &["large tap", "large burst", "small tap", "small burst"],
+            ),
+            Kind::Disturbance(_) => categories(PEAK, "N", true, DISTURBANCE_CATEGORIES),
+            Kind::Knock(_) => categories(PEAK, "N", true, &["tap", "burst"]),
+            Kind::SuddenAccel => edges(
+                "commanded acceleration",
+                "m/s^2",
+                false,
+                &[8.0, 13.0, 19.0, 25.0],
+            ),
+            Kind::Free => return None,
+        })
+    }
+
+    /// Where a run of this scenario falls in its [`Binning`], from the trace's metadata;
+    /// `None` when the trace lacks what it needs (not this simulator's, or free motion).
+    pub fn run_bin(self, trace: &Trace) -> Option<RunBin> {
+        let binning = self.binning()?;
+        let param =
+            |key: &str| -> Option<f64> { trace.meta(&format!("param.{key}"))?.parse().ok() };
+        let tap = || trace.meta("disturbance_kind").map(|k| k == "impulse");
+        // The peak force of the disturbance or knock, from its group's tap or burst fields.
+        let peak = |group: &str| -> Option<f64> {
+            let field = if tap()? {
+                "peak"
+            } else {
+                "vibration_amplitude"
+            };
+            let field = match (group, field) {
+                ("knock", f) => f.to_string(),
+                (_, "peak") => "impulse_peak".to_string(),
+                (_, f) => f.to_string(),
+            };
+            param(&format!("{group}.{field}"))
+        };
+        let size = || match self.kind() {
+            Kind::Disturbance(Size::Large) => Some("large"),
+            Kind::Disturbance(Size::Small) => Some("small"),
+            _ => trace.meta("disturbance_size"),
+        };
+        let value = match self.kind() {
+            Kind::Contact(ObjectKind::Hard) => param("hard_object.stiffness"),
+            Kind::Contact(ObjectKind::Soft) => param("soft_object.stiffness"),
+            Kind::Contact(ObjectKind::FirmSoft) => param("firm_soft_object.stiffness"),
+            Kind::Contact(ObjectKind::VerySoft) => param("very_soft_object.stiffness"),
+            Kind::Contact(ObjectKind::Movable) => param("movable_object.mass"),
+            Kind::BrakingContact => {
+                param("hard_object.stiffness").or_else(|| param("firm_soft_object.stiffness"))
+            }
+            Kind::Collision => param("motion.speed_factor").map(|f| f * self.nominal_speed()),
+            Kind::Disturbance(_) => peak(&format!("{}_disturbance", size()?)),
+            Kind::Knock(_) => peak("knock"),
+            Kind::SuddenAccel => param("sudden_accel.amplitude"),
+            Kind::Free => None,
+        }?;
+        let bin = match binning.split {
+            Split::Edges(edges) => edges[1..edges.len() - 1]
+                .iter()
+                .take_while(|&&e| value >= e)
+                .count(),
+            Split::Categories(names) => {
+                let kind = || tap().map(|t| if t { "tap" } else { "burst" });
+                let name = match self.kind() {
+                    Kind::Collision => trace.meta("struck_link")?.to_string(),
+                    Kind::Disturbance(Size::Either) => format!("{} {}", size()?, kind()?),
+                    Kind::Disturbance(_) => {
+                        format!("{} on {}", kind()?, trace.meta("disturbance_body")?)
+                    }
+                    _ => kind()?.to_string(),
+                };
+                names.iter().position(|n| *n == name)?
+            }
+        };
+        Some(RunBin { bin, value })
     }
 }
 
@@ -422,8 +612,9 @@ pub struct SimOptions {
     pub randomize: bool,
     /// The detector rate: the trace's sampling rate (200 Hz to 20 kHz).
     pub rate_hz: f64,
-    /// The robot controller's tick rate (500 Hz to 10 kHz): context updates and position
-    /// control.
+    /// The rate of the robot controller's context messages to the fingertip and of its
+    /// trajectory's ticks (500 Hz to 10 kHz); its joint loop runs at its own rate
+    /// (`plant.control_rate`).
     pub controller_rate_hz: f64,
     /// Length of the run in seconds (at most 3600). `None`: onset + 130 ms for single-event
     /// runs, 10 s for free motion.
@@ -479,9 +670,10 @@ fn check(
     }
 }
 
-/// The internal integration rate's oversampling factor for a detector rate.
-pub fn oversampling(rate_hz: f64) -> usize {
-    ((MIN_INTERNAL_RATE_HZ / rate_hz).ceil() as usize).max(4)
+/// The internal integration rate's oversampling factor for a detector rate `rate_hz` and
+/// a run whose mechanics need at least `required_hz`.
+fn oversampling(rate_hz: f64, required_hz: f64) -> usize {
+    ((required_hz.max(MIN_INTERNAL_RATE_HZ) / rate_hz).ceil() as usize).max(2)
 }
 
 /// A 64-bit mix (SplitMix64's finalizer).
@@ -527,7 +719,7 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         opts.controller_rate_hz,
         500.0,
         10_000.0,
-        "500 Hz to 10 kHz (the position loop is unstable much below)",
+        "500 Hz to 10 kHz",
     )?;
     if let Some(d) = opts.duration_s {
         check(
@@ -566,7 +758,13 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
 
     let duration = opts.duration_s.unwrap_or(scene.default_duration);
     let rows = (duration * opts.rate_hz).round() as usize + 1;
-    let n_over = oversampling(opts.rate_hz);
+    let (stiffest, required) =
+        engine::required_rate(&plant, scene.object.as_ref(), scene.obstacle.as_ref());
+    let n_over = oversampling(opts.rate_hz, required);
+    meta.push((
+        "stiffest_mode_hz".into(),
+        fmt_f64(stiffest / std::f64::consts::TAU),
+    ));
     let mut setup = Setup {
         plant,
         sensors,
@@ -577,13 +775,19 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         rows,
         rate_hz: opts.rate_hz,
         oversampling: n_over,
-        controller_rate_hz: opts.controller_rate_hz,
+        context_rate_hz: opts.controller_rate_hz,
     };
     let out = engine::run(&mut setup, &mut noise);
 
     let t: Vec<f64> = (0..rows).map(|k| k as f64 / opts.rate_hz).collect();
-    let onset = out.onset;
-    let truth = truth(scenario, onset, &t);
+    // The onset's time on the rows' clock, and the first row sampled at or after it (the
+    // sample of the onset's own step included).
+    let onset = out.onset.map(|(step, happened)| {
+        let (row, within) = (step / n_over as u64, step % n_over as u64);
+        let t_on = row as f64 / opts.rate_hz + within as f64 / (opts.rate_hz * n_over as f64);
+        (t_on, row + u64::from(within > 0), happened)
+    });
+    let truth = truth(scenario, onset, rows);
     let channels = CHANNELS
         .iter()
         .zip(out.channels)
@@ -661,16 +865,24 @@ fn approach_scene(
     };
     match kind {
         Kind::Contact(ok) => {
-            scene.object = Some(contact_object(ok, v0[0] * onset, prng, r, values));
+            let reach = [v0[0] * onset, v0[1] * onset];
+            scene.object = Some(contact_object(ok, reach, prng, r, values));
             scene.scheduled_onset = Some(onset);
         }
         Kind::Collision => {
             let o = Obstacle::choose(prng, r);
             values.extend(o.values());
+            let body = if r && prng.random::<f64>() < 0.5 {
+                Struck::Link2
+            } else {
+                Struck::Link1
+            };
+            meta.push(("struck_link".into(), body.name().into()));
             scene.obstacle = Some(ObstacleSetup {
                 position: v0[0] * onset,
                 stiffness: o.stiffness,
                 damping: o.damping,
+                body,
             });
             scene.scheduled_onset = Some(onset);
         }
@@ -683,16 +895,19 @@ fn approach_scene(
             let decel = [-b.deceleration * dir[0], -b.deceleration * dir[1]];
             scene.trajectory.set_accel(start, decel);
             scene.trajectory.set_accel(start + stop_ticks, [0.0; 2]);
-            let surface = scene.trajectory.at(contact).p[0];
+            let reach = scene.trajectory.at(contact).p;
             let hard = !r || prng.random::<f64>() < 0.5;
             let object = if hard {
                 ObjectKind::Hard
             } else {
-                ObjectKind::Soft
+                ObjectKind::FirmSoft
             };
-            meta.push(("object".into(), if hard { "hard" } else { "soft" }.into()));
+            meta.push((
+                "object".into(),
+                if hard { "hard" } else { "firm_soft" }.into(),
+            ));
             meta.push(("brake_onset_s".into(), fmt_f64(start as f64 * period)));
-            scene.object = Some(contact_object(object, surface, prng, r, values));
+            scene.object = Some(contact_object(object, reach, prng, r, values));
             scene.scheduled_onset = Some(contact as f64 * period);
             scene.default_duration = contact as f64 * period + AFTER_ONSET_S;
         }
@@ -712,15 +927,25 @@ fn approach_scene(
         Kind::Knock(body) => {
             let k = Knock::choose(prng, r);
             values.extend(k.values());
+            // Nominal: a tap against the approach. Randomized: tap or burst, +x or -x.
+            let burst = r && prng.random::<f64>() < 0.5;
             let direction = random_direction(prng, r) + k.direction_offset;
-            meta.push(("disturbance_kind".into(), "knock".into()));
-            meta.push(("disturbance_direction_rad".into(), fmt_f64(direction)));
-            scene.disturbance = Some(DisturbanceSetup {
-                start: onset,
-                kind: DisturbanceKind::Impulse {
+            let kind = if burst {
+                DisturbanceKind::Vibration {
+                    amplitude: k.vibration_amplitude,
+                    frequency: k.vibration_frequency,
+                    duration: k.vibration_duration,
+                }
+            } else {
+                DisturbanceKind::Impulse {
                     peak: k.peak,
                     duration: k.duration,
-                },
+                }
+            };
+            push_disturbance_meta(meta, kind, direction, body);
+            scene.disturbance = Some(DisturbanceSetup {
+                start: onset,
+                kind,
                 direction,
                 body,
             });
@@ -741,15 +966,15 @@ fn approach_scene(
     scene
 }
 
-/// The truth column over the sample times `t`: the name of the event that happened from
-/// the first sample at or after its physical `onset` on, when the scenario expects one.
-fn truth(scenario: Scenario, onset: Option<(f64, Happened)>, t: &[f64]) -> Labels {
-    let rows = t.len();
+/// The truth column of `rows` rows: the name of the event that happened from the first row
+/// sampled at or after its physical `onset` (time, that row, what happened) on, when the
+/// scenario expects one.
+fn truth(scenario: Scenario, onset: Option<(f64, u64, Happened)>, rows: usize) -> Labels {
     let truth_start = match (scenario.expected(), onset) {
-        (Some(_), Some((t_on, _))) => t.iter().position(|&tk| tk >= t_on).unwrap_or(rows),
+        (Some(_), Some((_, row, _))) => (row as usize).min(rows),
         _ => rows,
     };
-    let label = match onset.map(|o| o.1) {
+    let label = match onset.map(|o| o.2) {
         Some(Happened::Contact) => CONTACT,
         Some(Happened::Collision) => LINK_COLLISION,
         Some(Happened::Disturbance) => DISTURBANCE,
@@ -758,51 +983,73 @@ fn truth(scenario: Scenario, onset: Option<(f64, Happened)>, t: &[f64]) -> Label
     Labels::switch_at("", label, truth_start, rows)
 }
 
-/// The object a contact scenario touches, its surface at `surface`, with its parameters
-/// drawn (and recorded in `values`).
+/// The object a contact scenario touches, its surface crossed when the command has moved
+/// by `reach` (m, x and y), with its surface's and its own parameters drawn (and recorded
+/// in `values`).
 fn contact_object(
     kind: ObjectKind,
-    surface: f64,
+    reach: [f64; 2],
     prng: &mut Xoshiro256PlusPlus,
     r: bool,
     values: &mut Vec<(String, f64)>,
 ) -> ObjectSetup {
-    let (stiffness, damping, movable) = match kind {
+    let surface = Surface::choose(prng, r);
+    values.extend(surface.values());
+    let linear = |stiffness| ContactLaw::Linear { stiffness };
+    let (law, damping, movable) = match kind {
         ObjectKind::Hard => {
             let o = HardObject::choose(prng, r);
             values.extend(o.values());
-            (o.stiffness, o.damping, None)
+            (
+                ContactLaw::Hertz {
+                    stiffness: o.stiffness,
+                },
+                o.damping,
+                None,
+            )
         }
         ObjectKind::Soft => {
             let o = SoftObject::choose(prng, r);
             values.extend(o.values());
-            (o.stiffness, o.damping, None)
+            (linear(o.stiffness), o.damping, None)
+        }
+        ObjectKind::FirmSoft => {
+            let o = FirmSoftObject::choose(prng, r);
+            values.extend(o.values());
+            (linear(o.stiffness), o.damping, None)
         }
         ObjectKind::VerySoft => {
             let o = VerySoftObject::choose(prng, r);
             values.extend(o.values());
-            (o.stiffness, o.damping, None)
+            (linear(o.stiffness), o.damping, None)
         }
         ObjectKind::Movable => {
             let o = MovableObject::choose(prng, r);
             values.extend(o.values());
             (
-                o.stiffness,
+                ContactLaw::Hertz {
+                    stiffness: o.stiffness,
+                },
                 o.damping,
                 Some((o.mass, o.friction, o.friction * o.static_ratio)),
             )
         }
     };
+    // Rigid objects do not relax.
+    let relaxes = matches!(law, ContactLaw::Linear { .. }) && surface.relaxation > 0.0;
+    let (sin, cos) = surface.tilt.sin_cos();
     ObjectSetup {
-        surface,
-        stiffness,
+        surface: cos * reach[0] + sin * reach[1],
+        tilt: surface.tilt,
+        law,
         damping,
+        relaxation: relaxes.then_some((surface.relaxation, surface.relaxation_time)),
         movable,
     }
 }
 
 /// A disturbance of the given size starting at `onset`, with its parameters drawn
-/// (recorded in `values`) and its kind and direction recorded in `meta`.
+/// (recorded in `values`) and its kind, direction and struck body recorded in `meta`.
 fn disturbance_setup(
     large: bool,
     onset: f64,
@@ -835,10 +1082,15 @@ fn disturbance_setup(
             d.direction_offset,
         )
     };
-    // Nominal: a vibration against the approach (-x). Randomized: impulse or
-    // vibration, towards +x or -x, each equally likely.
+    // Nominal: a vibration against the approach (-x) on link 2. Randomized: tap or
+    // vibration, towards +x or -x, on the tip, link 2 or link 1, each equally likely.
     let impulse = r && prng.random::<f64>() < 0.5;
     let base = random_direction(prng, r);
+    let body = if r {
+        [Struck::Tip, Struck::Link2, Struck::Link1][prng.random_range(0..3usize)]
+    } else {
+        Struck::Link2
+    };
     let kind = if impulse {
         DisturbanceKind::Impulse { peak, duration }
     } else {
@@ -848,17 +1100,30 @@ fn disturbance_setup(
             duration: burst,
         }
     };
-    meta.push((
-        "disturbance_kind".into(),
-        if impulse { "impulse" } else { "vibration" }.into(),
-    ));
-    meta.push(("disturbance_direction_rad".into(), fmt_f64(base + offset)));
+    push_disturbance_meta(meta, kind, base + offset, body);
     DisturbanceSetup {
         start: onset,
         kind,
         direction: base + offset,
-        body: Struck::Distal,
+        body,
     }
+}
+
+/// Records a disturbance's kind (`impulse`: a tap, or `vibration`: a burst), its
+/// direction and the body it strikes.
+fn push_disturbance_meta(
+    meta: &mut Vec<(String, String)>,
+    kind: DisturbanceKind,
+    direction: f64,
+    body: Struck,
+) {
+    let name = match kind {
+        DisturbanceKind::Impulse { .. } => "impulse",
+        DisturbanceKind::Vibration { .. } => "vibration",
+    };
+    meta.push(("disturbance_kind".into(), name.into()));
+    meta.push(("disturbance_direction_rad".into(), fmt_f64(direction)));
+    meta.push(("disturbance_body".into(), body.name().into()));
 }
 
 /// A disturbance's base direction: against the approach (-x, angle pi) in nominal runs,

@@ -4,7 +4,9 @@
 //! Every parameter is declared once, below, with its unit, nominal value, range and
 //! meaning; [`all_specs`] lists them all and `docs/simulator.md` carries the same table
 //! (a test keeps the two in step). Randomized runs draw each parameter of the groups a
-//! scenario uses uniformly from its range, independently, in declaration order.
+//! scenario from its range, independently, in declaration order: uniformly, or
+//! log-uniformly (every decade equally likely) for those marked `log`, the ones that span
+//! decades such as stiffnesses.
 
 use rand::{Rng, RngExt};
 
@@ -23,6 +25,8 @@ pub struct ParamSpec {
     pub min: f64,
     /// The largest value a randomized run draws.
     pub max: f64,
+    /// Drawn log-uniformly (every decade equally likely) rather than uniformly.
+    pub log: bool,
     /// What the parameter is.
     pub doc: &'static str,
 }
@@ -36,11 +40,18 @@ pub(crate) fn uniform<R: Rng>(rng: &mut R, lo: f64, hi: f64) -> f64 {
     }
 }
 
+/// A log-uniform draw from `[lo, hi]` (`0 < lo`): every decade equally likely.
+pub(crate) fn log_uniform<R: Rng>(rng: &mut R, lo: f64, hi: f64) -> f64 {
+    uniform(rng, lo.ln(), hi.ln()).exp().clamp(lo, hi)
+}
+
 macro_rules! param_group {
+    (@log) => { false };
+    (@log log) => { true };
     (
         $(#[doc = $sdoc:literal])+
         struct $name:ident, group $group:literal {
-            $( $(#[doc = $doc:literal])+ $field:ident: $unit:literal = $nom:expr, [$lo:expr, $hi:expr]; )+
+            $( $(#[doc = $doc:literal])+ $field:ident: $unit:literal = $nom:expr, [$lo:expr, $hi:expr] $($scale:ident)?; )+
         }
     ) => {
         $(#[doc = $sdoc])+
@@ -59,6 +70,7 @@ macro_rules! param_group {
                     nominal: $nom,
                     min: $lo,
                     max: $hi,
+                    log: param_group!(@log $($scale)?),
                     doc: concat!($($doc),+),
                 }, )+
             ];
@@ -68,9 +80,14 @@ macro_rules! param_group {
                 Self { $( $field: $nom, )+ }
             }
 
-            /// Every parameter drawn uniformly from its range, in declaration order.
+            /// Every parameter drawn from its range (log-uniformly where so marked), in
+            /// declaration order.
             pub fn draw<R: Rng>(rng: &mut R) -> Self {
-                Self { $( $field: uniform(rng, $lo, $hi), )+ }
+                Self { $( $field: if param_group!(@log $($scale)?) {
+                    log_uniform(rng, $lo, $hi)
+                } else {
+                    uniform(rng, $lo, $hi)
+                }, )+ }
             }
 
             /// Nominal values, or drawn ones when `randomize` is set.
@@ -86,41 +103,68 @@ macro_rules! param_group {
     };
 }
 
+/// 5 degrees (rad): the mounting tolerance of a sensor.
+const FIVE_DEGREES: f64 = 0.087_266_462_599_716_48;
+
+/// 15 degrees (rad): the largest tilt of an object's surface from the approach.
+const FIFTEEN_DEGREES: f64 = 0.261_799_387_799_149_4;
+
 param_group! {
-    /// The finger and its fingertip: masses, the foam core, the distal link's compliance,
-    /// the position controller and the drive.
+    /// The finger and its fingertip: masses, the foam core, the distal structure's
+    /// compliance, the joint controller, its context messages and the drive.
     struct Plant, group "plant" {
         /// Effective mass, at the tip, of the proximal part of the finger (motors reflected
-        /// through the transmission and the proximal link), where the position controller
-        /// acts and which can strike an obstacle.
+        /// through the transmission and link 1, the proximal link), where the joint
+        /// controller acts and which link collisions and knocks on link 1 strike.
         arm_mass: "kg" = 0.30, [0.25, 0.50];
-        /// Mass of the distal link below the force sensor.
+        /// Mass of link 2 (the distal link) below the force sensor.
         distal_mass: "kg" = 0.05, [0.03, 0.08];
         /// Mass of the fingertip above the force sensor (housing, electronics, foam base):
-        /// the mass whose inertia loads the force sensor in a sudden acceleration.
+        /// the mass whose inertia loads the force sensor in a sudden acceleration, and the
+        /// body a tap on the tip strikes.
         carrier_mass: "kg" = 0.030, [0.020, 0.045];
-        /// Mass of the rubber skin (with its accelerometer and stress-rate film).
-        skin_mass: "kg" = 0.002, [0.0015, 0.003];
+        /// Mass riding on the foam core: the rubber skin with its accelerometer and
+        /// stress-rate film, and any pad or nail it carries (a thin skin weighs a few grams,
+        /// a padded tip tens of grams).
+        skin_mass: "kg" = 0.002, [0.0015, 0.03] log;
         /// Normal stiffness of the foam core between carrier and skin.
-        foam_stiffness: "N/m" = 4000.0, [2500.0, 6000.0];
-        /// Damping ratio of the skin-on-foam mode (its frequency is
-        /// sqrt(foam_stiffness / skin_mass) / 2 pi: 225 Hz nominal, 145 to 320 Hz).
+        foam_stiffness: "N/m" = 4000.0, [500.0, 6000.0] log;
+        /// Damping ratio of the fingertip's suspension mode: the skin (and pad) on the foam,
+        /// at sqrt(foam_stiffness / skin_mass) / 2 pi: 225 Hz nominal, 20 Hz (a padded tip on
+        /// soft foam) to 320 Hz (a thin skin on firm foam).
         foam_damping_ratio: "1" = 0.08, [0.05, 0.15];
         /// Tangential (shear) stiffness of the foam as a fraction of its normal stiffness.
         foam_shear_ratio: "1" = 0.5, [0.3, 0.7];
-        /// Frequency of the structural mode of the distal link and fingertip on the
-        /// finger's compliance (link bending, transmission).
-        link_frequency: "Hz" = 120.0, [80.0, 160.0];
-        /// Damping ratio of that structural mode.
-        link_damping_ratio: "1" = 0.05, [0.02, 0.08];
-        /// Bandwidth of the position controller (PD with feedforward of the commanded
-        /// acceleration, run at the controller rate on the motor-side position).
-        control_bandwidth: "Hz" = 30.0, [20.0, 50.0];
+        /// Frequency of the distal structure's bending mode: link 2 and the fingertip
+        /// vibrating against link 1 on the finger's compliance (link bending, joint 2's
+        /// transmission). It rings after a collision or a knock.
+        link_frequency: "Hz" = 120.0, [80.0, 400.0] log;
+        /// Damping ratio of that bending mode.
+        link_damping_ratio: "1" = 0.05, [0.01, 0.08];
+        /// Rate of the joint controller's loop (PD with feedforward, on the motor-side
+        /// position quantized to 1 um).
+        control_rate: "Hz" = 1000.0, [1000.0, 2000.0];
+        /// Bandwidth of the joint position loop.
+        control_bandwidth: "Hz" = 30.0, [10.0, 50.0];
         /// Damping ratio of the position loop.
         control_damping_ratio: "1" = 0.8, [0.7, 1.0];
-        /// Coulomb friction of the drive, at the tip, not compensated by the controller
-        /// (proportional to speed below 1 mm/s). With the viscous friction it sets the position
-        /// error's baseline while moving: friction / (arm stiffness of the position loop).
+        /// Error of the controller's feedforward model: it feeds forward (1 + this) x the
+        /// finger's mass x the commanded acceleration.
+        feedforward_error: "1" = 0.0, [-0.15, 0.15];
+        /// Share of the drive's friction the controller compensates, from the commanded
+        /// velocity (Coulomb and viscous, with the true coefficients).
+        friction_compensation: "1" = 0.0, [0.0, 0.8];
+        /// Force limit of the drive at the tip, per axis (the joints' torque limits): the
+        /// controller's force saturates at +- this.
+        force_limit: "N" = 20.0, [8.0, 30.0];
+        /// Latency of the controller's context messages (position error, commanded
+        /// velocity and acceleration): each reaches the fingertip this long after the
+        /// controller computed it.
+        context_latency: "s" = 0.0002, [0.0002, 0.0008];
+        /// Coulomb friction of the drive, at the tip (proportional to speed below 1 mm/s).
+        /// What the controller leaves uncompensated, with the viscous friction, sets the
+        /// position error's baseline while moving: friction / (stiffness of the position
+        /// loop).
         arm_coulomb_friction: "N" = 0.15, [0.05, 0.3];
         /// Viscous friction of the drive, at the tip.
         arm_viscous_friction: "N s/m" = 1.0, [0.0, 2.0];
@@ -129,7 +173,7 @@ param_group! {
         /// Tip travel per ripple period (the ripple's frequency is speed / pitch).
         ripple_pitch: "m" = 0.0005, [0.0003, 0.001];
         /// Friction coefficient between skin and object (tangential contact force limit).
-        skin_friction: "1" = 1.0, [0.6, 1.2];
+        skin_friction: "1" = 1.0, [0.3, 1.2];
         /// Tangential stiffness of the skin-object contact while sticking.
         tangential_stiffness: "N/m" = 5000.0, [3000.0, 8000.0];
     }
@@ -140,19 +184,33 @@ param_group! {
     /// see [`super::CHANNELS`]).
     struct Sensors, group "sensors" {
         /// Gain error of the force sensor's x axis (reading = gain x true).
-        force_x_gain: "1" = 1.0, [0.95, 1.05];
+        force_x_gain: "1" = 1.0, [0.9, 1.1];
         /// Gain error of the force sensor's y axis.
-        force_y_gain: "1" = 1.0, [0.95, 1.05];
+        force_y_gain: "1" = 1.0, [0.9, 1.1];
         /// Gain error of the skin accelerometer.
         accel_gain: "1" = 1.0, [0.9, 1.1];
         /// Gain error of the stress-rate sensor.
         stress_gain: "1" = 1.0, [0.9, 1.1];
+        /// Cross-axis sensitivity of the force sensor's x axis to the force along its y axis.
+        force_x_cross_axis: "1" = 0.0, [-0.03, 0.03];
+        /// Cross-axis sensitivity of the force sensor's y axis to the force along its x axis.
+        force_y_cross_axis: "1" = 0.0, [-0.03, 0.03];
+        /// Mounting misalignment of the force sensor: its axes turned by this angle from the
+        /// fingertip's.
+        force_misalignment: "rad" = 0.0, [-FIVE_DEGREES, FIVE_DEGREES];
+        /// Mounting misalignment of the accelerometer's axis from the pad normal x, towards y.
+        accel_misalignment: "rad" = 0.0, [-FIVE_DEGREES, FIVE_DEGREES];
         /// Multiplies every analog channel's base noise (see the channel table).
         noise_scale: "1" = 1.0, [0.5, 2.0];
-        /// Amplitude of the mains hum on each analog channel, in LSB of that channel.
+        /// Amplitude of the mains hum's fundamental on each analog channel, in LSB of that
+        /// channel.
         hum_lsb: "1" = 1.0, [0.0, 3.0];
         /// Mains frequency.
         hum_frequency: "Hz" = 50.0, [49.9, 50.1];
+        /// Amplitude of the hum's second harmonic as a fraction of its fundamental.
+        hum_harmonic2: "1" = 0.0, [0.0, 0.5];
+        /// Amplitude of the hum's third harmonic as a fraction of its fundamental.
+        hum_harmonic3: "1" = 0.0, [0.0, 0.5];
         /// Residual offset of the force x axis after taring.
         force_x_offset: "N" = 0.0, [-0.05, 0.05];
         /// Residual offset of the force y axis after taring.
@@ -171,8 +229,9 @@ param_group! {
         stress_drift: "N/s^2" = 0.0, [-0.1, 0.1];
         /// Corner of the accelerometer's AC coupling (first-order high-pass).
         accel_highpass: "Hz" = 15.0, [10.0, 20.0];
-        /// Cross-axis sensitivity of the accelerometer to the skin's y acceleration.
-        accel_cross_axis: "1" = 0.03, [0.0, 0.05];
+        /// Cross-axis sensitivity of the accelerometer to the skin's acceleration across its
+        /// axis.
+        accel_cross_axis: "1" = 0.03, [-0.05, 0.05];
         /// Stress-rate crosstalk from the foam's deformation (film bending) as a fraction
         /// of the rate of the foam force: what makes the sensor not perfectly silent
         /// without contact.
@@ -195,20 +254,49 @@ param_group! {
 }
 
 param_group! {
-    /// A hard object: the contact stiffness of skin rubber on a rigid surface.
+    /// The surface of any object the fingertip touches.
+    struct Surface, group "surface" {
+        /// Tilt of the surface's normal from the approach direction x, towards y: the
+        /// contact's normal force and its friction turn with it.
+        tilt: "rad" = 0.0, [-FIFTEEN_DEGREES, FIFTEEN_DEGREES];
+        /// Viscoelastic relaxation of a soft object (foam, fruit; a standard linear solid):
+        /// the share of its stiffness that relaxes away under a held deformation. Rigid
+        /// (Hertz) objects do not relax.
+        relaxation: "1" = 0.0, [0.0, 0.5];
+        /// Time constant of that relaxation.
+        relaxation_time: "s" = 0.2, [0.02, 1.0] log;
+    }
+}
+
+param_group! {
+    /// A rigid object: a Hertz contact of the skin on it, force = K depth^1.5 (1 + damping x
+    /// depth rate), K such that the force is 1 N at a depth of 1 N / stiffness.
     struct HardObject, group "hard_object" {
-        /// Contact stiffness (skin rubber in series with the object).
-        stiffness: "N/m" = 80_000.0, [50_000.0, 100_000.0];
-        /// Hunt-Crossley damping: contact force = stiffness x depth x (1 + damping x depth rate).
+        /// Secant stiffness at 1 N: the contact force over the depth when pressing with 1 N
+        /// (the tangent stiffness is 1.5 times that there, and grows as force^(1/3)).
+        stiffness: "N/m" = 80_000.0, [10_000.0, 100_000.0] log;
+        /// Hunt-Crossley damping.
         damping: "s/m" = 15.0, [5.0, 30.0];
     }
 }
 
 param_group! {
-    /// A soft object (sponge, fruit).
+    /// A soft object (sponge, fruit, foam rubber): a linear Hunt-Crossley contact,
+    /// force = stiffness x depth x (1 + damping x depth rate), never pulling.
     struct SoftObject, group "soft_object" {
         /// Contact stiffness.
-        stiffness: "N/m" = 2000.0, [1000.0, 3000.0];
+        stiffness: "N/m" = 2000.0, [100.0, 3000.0] log;
+        /// Hunt-Crossley damping.
+        damping: "s/m" = 40.0, [20.0, 80.0];
+    }
+}
+
+param_group! {
+    /// A firm soft object: the stiffer part of the soft ones (a firm sponge, a fruit), for
+    /// contacts while braking.
+    struct FirmSoftObject, group "firm_soft_object" {
+        /// Contact stiffness.
+        stiffness: "N/m" = 2000.0, [1000.0, 3000.0] log;
         /// Hunt-Crossley damping.
         damping: "s/m" = 40.0, [20.0, 80.0];
     }
@@ -230,8 +318,8 @@ param_group! {
     /// commanded velocity falls at a constant deceleration from `motion.onset` on (until
     /// the finger would stop), and the object's surface is where the command is a chosen
     /// fraction of that stopping time later. Randomized runs touch a hard object or a
-    /// soft one (the `hard_object` or `soft_object` ranges), equally likely; nominal runs a
-    /// hard one.
+    /// firm soft one (the `hard_object` or `firm_soft_object` ranges), equally likely;
+    /// nominal runs a hard one.
     struct Braking, group "braking" {
         /// The commanded deceleration.
         deceleration: "m/s^2" = 0.6, [0.3, 1.0];
@@ -242,65 +330,75 @@ param_group! {
 }
 
 param_group! {
-    /// A knock: a short half-sine force pulse struck on a link of the finger, not on the
-    /// fingertip (a person's hand, a tool, a neighbouring finger), in a direction within 45
-    /// degrees of +x or -x (equally likely in randomized runs; nominal: against the
-    /// approach). The finger is pushed off its path and the controller brings it back.
+    /// A knock: a tap (a half-sine force pulse) or a vibration burst struck on a link of the
+    /// finger, not on the fingertip (a person's hand, a tool, a neighbouring finger), in a
+    /// direction within 45 degrees of +x or -x (equally likely in randomized runs, as tap
+    /// or burst; nominal: a tap against the approach). The finger is pushed off its path
+    /// and the controller brings it back.
     struct Knock, group "knock" {
-        /// Peak force.
+        /// Peak force of a tap.
         peak: "N" = 6.0, [2.0, 15.0];
-        /// Duration of the pulse.
+        /// Duration of a tap.
         duration: "s" = 0.001, [0.0005, 0.003];
+        /// Amplitude of a sinusoidal burst (starting at phase zero).
+        vibration_amplitude: "N" = 2.0, [0.5, 3.0];
+        /// Frequency of a burst.
+        vibration_frequency: "Hz" = 100.0, [40.0, 400.0] log;
+        /// Duration of a burst.
+        vibration_duration: "s" = 0.050, [0.010, 0.100];
         /// Angle of the force from the nearer of +x and -x, towards y.
         direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
 }
 
 param_group! {
-    /// An object resting on a table that slides when pushed (Coulomb friction).
+    /// An object resting on a table that slides when pushed (Coulomb friction), touched
+    /// through a Hertz contact as a hard object is.
     struct MovableObject, group "movable_object" {
         /// The object's mass.
-        mass: "kg" = 0.2, [0.1, 0.3];
+        mass: "kg" = 0.2, [0.05, 0.5];
         /// Kinetic friction coefficient with the table (normal force mass x 9.81 m/s^2).
         friction: "1" = 0.5, [0.3, 0.6];
         /// Static over kinetic friction.
         static_ratio: "1" = 1.2, [1.0, 1.4];
-        /// Contact stiffness of skin on the object.
-        stiffness: "N/m" = 50_000.0, [30_000.0, 80_000.0];
+        /// Secant stiffness at 1 N of the Hertz contact of skin on the object.
+        stiffness: "N/m" = 50_000.0, [10_000.0, 100_000.0] log;
         /// Hunt-Crossley damping of that contact.
         damping: "s/m" = 15.0, [5.0, 30.0];
     }
 }
 
 param_group! {
-    /// The obstacle the proximal link strikes in a link collision.
+    /// The obstacle a link strikes in a link collision: link 1 (the proximal link, nominal)
+    /// or link 2 (the distal link, below the force sensor), equally likely in randomized
+    /// runs.
     struct Obstacle, group "obstacle" {
         /// Contact stiffness of link on obstacle.
-        stiffness: "N/m" = 1_000_000.0, [300_000.0, 2_000_000.0];
+        stiffness: "N/m" = 1_000_000.0, [300_000.0, 2_000_000.0] log;
         /// Hunt-Crossley damping.
         damping: "s/m" = 10.0, [5.0, 20.0];
     }
 }
 
 param_group! {
-    /// A large disturbance: a shock or a vibration reaching the fingertip through the
-    /// finger's structure (applied to the distal link, below the force sensor) while the
-    /// fingertip touches nothing. Randomized runs pick an impulse or a vibration burst with
-    /// equal probability and a direction within 45 degrees of +x or -x (equally likely);
-    /// nominal runs are vibration bursts against the approach (the paper's Figure 4).
+    /// A large disturbance: a tap or a vibration burst struck on the finger while the
+    /// fingertip touches nothing: on link 2 below the force sensor (nominal), on link 1, or
+    /// on the fingertip's housing above the sensor (the tip). Randomized runs pick tap or
+    /// burst, the struck body, and a direction within 45 degrees of +x or -x, each equally
+    /// likely; nominal runs are bursts against the approach (the paper's Figure 4).
     /// Directions nearer y are not drawn: the skin accelerometer measures along x only,
     /// and such a disturbance would show on `force_y` alone.
     struct LargeDisturbance, group "large_disturbance" {
-        /// Peak of a half-sine force impulse.
+        /// Peak of a tap (a half-sine force pulse).
         impulse_peak: "N" = 6.0, [4.0, 10.0];
-        /// Duration of the impulse.
-        impulse_duration: "s" = 0.001, [0.0005, 0.0015];
+        /// Duration of a tap.
+        impulse_duration: "s" = 0.001, [0.0005, 0.003];
         /// Amplitude of a sinusoidal vibration burst (starting at phase zero).
         vibration_amplitude: "N" = 2.0, [1.0, 3.0];
-        /// Frequency of the vibration (structural vibration, above the controller's band).
-        vibration_frequency: "Hz" = 200.0, [100.0, 400.0];
-        /// Duration of the vibration burst.
-        vibration_duration: "s" = 0.040, [0.010, 0.060];
+        /// Frequency of the burst.
+        vibration_frequency: "Hz" = 200.0, [40.0, 400.0] log;
+        /// Duration of the burst.
+        vibration_duration: "s" = 0.040, [0.010, 0.100];
         /// Angle of the force from the nearer of +x and -x, towards y.
         direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
@@ -310,16 +408,16 @@ param_group! {
     /// A small disturbance: as a large one, with smaller forces. Still well above the
     /// sensors' noise: its skin acceleration peaks at several m/s^2 or more.
     struct SmallDisturbance, group "small_disturbance" {
-        /// Peak of a half-sine force impulse.
+        /// Peak of a tap.
         impulse_peak: "N" = 1.5, [1.0, 3.0];
-        /// Duration of the impulse.
-        impulse_duration: "s" = 0.001, [0.0005, 0.0015];
+        /// Duration of a tap.
+        impulse_duration: "s" = 0.001, [0.0005, 0.003];
         /// Amplitude of a sinusoidal vibration burst (starting at phase zero).
         vibration_amplitude: "N" = 0.5, [0.3, 0.8];
-        /// Frequency of the vibration.
-        vibration_frequency: "Hz" = 200.0, [100.0, 400.0];
-        /// Duration of the vibration burst.
-        vibration_duration: "s" = 0.040, [0.010, 0.060];
+        /// Frequency of the burst.
+        vibration_frequency: "Hz" = 200.0, [40.0, 400.0] log;
+        /// Duration of the burst.
+        vibration_duration: "s" = 0.040, [0.010, 0.100];
         /// Angle of the force from the nearer of +x and -x, towards y.
         direction_offset: "rad" = 0.0, [-std::f64::consts::FRAC_PI_4, std::f64::consts::FRAC_PI_4];
     }
@@ -338,20 +436,31 @@ param_group! {
 }
 
 param_group! {
-    /// Event-free motion: random point-to-point moves in the plane with trapezoidal speed
-    /// profiles and pauses; each move draws its own values from these ranges (the nominal
-    /// values are only used to describe them).
+    /// Event-free motion: a sequence of segments, each a point-to-point move (trapezoidal
+    /// speed profile, sudden accelerations included) or a change of the cruising velocity
+    /// (a gentle ramp to a new speed and direction, then cruising: slowing down, speeding
+    /// up, turning, stopping), with pauses; each segment draws its own values from these
+    /// ranges (the nominal values are only used to describe them).
     struct FreeMotion, group "free_motion" {
-        /// Probability that a pause (fingertip at rest) precedes a move.
+        /// Probability that a pause (fingertip at rest) precedes a point-to-point move.
         pause_probability: "1" = 0.5, [0.5, 0.5];
         /// Duration of a pause.
         pause: "s" = 0.1, [0.02, 0.3];
-        /// Length of a move.
+        /// Probability that a segment is a change of cruising velocity rather than a
+        /// point-to-point move.
+        change_probability: "1" = 0.5, [0.5, 0.5];
+        /// Length of a point-to-point move.
         distance: "m" = 0.015, [0.002, 0.03];
-        /// Peak speed of a move.
+        /// Peak speed of a point-to-point move.
         speed: "m/s" = 0.05, [0.01, 0.10];
-        /// Acceleration of a move, drawn log-uniformly (sudden ones included).
-        acceleration: "m/s^2" = 2.0, [0.3, 25.0];
+        /// Acceleration of a point-to-point move (sudden ones included).
+        acceleration: "m/s^2" = 2.0, [0.2, 25.0] log;
+        /// The new cruising speed of a velocity change (0: it stops).
+        cruise_speed: "m/s" = 0.05, [0.0, 0.10];
+        /// Acceleration of a velocity change.
+        gentle_acceleration: "m/s^2" = 1.0, [0.2, 3.0] log;
+        /// How long the finger cruises after a velocity change.
+        cruise: "s" = 0.1, [0.02, 0.5];
         /// Moves stay within this distance of the start point.
         workspace_radius: "m" = 0.04, [0.04, 0.04];
     }
@@ -366,7 +475,9 @@ pub fn all_specs() -> Vec<ParamSpec> {
         Sensors::SPECS,
         Motion::SPECS,
         HardObject::SPECS,
+        Surface::SPECS,
         SoftObject::SPECS,
+        FirmSoftObject::SPECS,
         VerySoftObject::SPECS,
         Braking::SPECS,
         MovableObject::SPECS,
@@ -389,13 +500,14 @@ pub fn specs_markdown() -> String {
     );
     for p in all_specs() {
         s.push_str(&format!(
-            "| `{}.{}` | {} | {} | {} .. {} | {} |\n",
+            "| `{}.{}` | {} | {} | {} .. {}{} | {} |\n",
             p.group,
             p.name,
             p.unit,
             fmt_num(p.nominal),
             fmt_num(p.min),
             fmt_num(p.max),
+            if p.log { " (log)" } else { "" },
             p.doc.trim().replace("  ", " ")
         ));
     }
@@ -437,6 +549,22 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A log-uniform parameter is below its range's geometric mean half the time; a uniform
+    /// draw would put about 80 % of 100 .. 3000 above it.
+    #[test]
+    fn log_parameters_are_drawn_evenly_per_decade() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(11);
+        let spec = SoftObject::SPECS[0];
+        assert!(spec.log);
+        let middle = (spec.min * spec.max).sqrt();
+        let n = 4000;
+        let below = (0..n)
+            .filter(|_| SoftObject::draw(&mut rng).stiffness < middle)
+            .count();
+        assert!((1800..2200).contains(&below), "{below} of {n}");
     }
 
     #[test]

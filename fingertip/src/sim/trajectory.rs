@@ -4,8 +4,9 @@
 //! acceleration falls on a tick, and the context the fingertip receives (desired velocity
 //! and acceleration) is exactly what the controller applies.
 
-use super::params::{FreeMotion, uniform};
+use super::params::{FreeMotion, log_uniform, uniform};
 use rand::{Rng, RngExt};
+use std::f64::consts::{PI, TAU};
 
 /// The commanded position, velocity and acceleration at one instant (x, y in the
 /// fingertip frame).
@@ -78,14 +79,24 @@ impl Trajectory {
 
     /// The command at controller tick `tick`. Fast when ticks are asked in increasing order.
     pub(crate) fn at(&mut self, tick: u64) -> Command {
-        if self.pieces[self.cursor].tick > tick {
-            self.cursor = 0;
+        self.at_time(tick as f64 * self.period)
+    }
+
+    /// The command at time `t` (s), between ticks too (the joint loop runs at its own
+    /// rate). Fast when times are asked in increasing order.
+    pub(crate) fn at_time(&mut self, t: f64) -> Command {
+        // Half a nanosecond of slack: a tick's own time belongs to the piece it starts.
+        let starts = |pc: &Piece| pc.tick as f64 * self.period <= t + 5e-10;
+        // The joint loop and the context ask in turn, a step's worth apart at most: walk
+        // back as far as needed.
+        while self.cursor > 0 && !starts(&self.pieces[self.cursor]) {
+            self.cursor -= 1;
         }
-        while self.cursor + 1 < self.pieces.len() && self.pieces[self.cursor + 1].tick <= tick {
+        while self.cursor + 1 < self.pieces.len() && starts(&self.pieces[self.cursor + 1]) {
             self.cursor += 1;
         }
         let pc = &self.pieces[self.cursor];
-        let dt = (tick - pc.tick) as f64 * self.period;
+        let dt = (t - pc.tick as f64 * self.period).max(0.0);
         let mut c = Command {
             a: pc.a,
             ..Command::default()
@@ -97,11 +108,14 @@ impl Trajectory {
         c
     }
 
-    /// Random event-free motion lasting at least `ticks` ticks: pauses and point-to-point
-    /// moves with trapezoidal (or triangular) speed profiles, every value drawn from the
-    /// ranges of [`FreeMotion`] (acceleration log-uniformly). Moves stay within the
-    /// workspace radius of the start point: a move that would leave it heads back towards
-    /// the start instead.
+    /// Random event-free motion lasting at least `ticks` ticks, every value drawn from the
+    /// ranges of [`FreeMotion`] (accelerations log-uniformly): segments that are either
+    /// point-to-point moves from rest (after an optional pause) with trapezoidal (or
+    /// triangular) speed profiles, or gentle changes of the cruising velocity (a ramp to a
+    /// new speed and direction, then cruising). The motion stays near the start point:
+    /// a move that would leave the workspace radius heads back towards the start instead,
+    /// and so does every velocity change made more than a quarter of that radius away. It
+    /// ends at rest.
     pub(crate) fn free_motion<R: Rng>(period: f64, ticks: u64, rng: &mut R) -> Trajectory {
         let spec = |name: &str| {
             FreeMotion::SPECS
@@ -112,48 +126,119 @@ impl Trajectory {
         };
         let (pause_p, _) = spec("pause_probability");
         let (pause_lo, pause_hi) = spec("pause");
+        let (change_p, _) = spec("change_probability");
         let (dist_lo, dist_hi) = spec("distance");
         let (speed_lo, speed_hi) = spec("speed");
         let (acc_lo, acc_hi) = spec("acceleration");
+        let (cruise_speed_lo, cruise_speed_hi) = spec("cruise_speed");
+        let (gentle_lo, gentle_hi) = spec("gentle_acceleration");
+        let (cruise_lo, cruise_hi) = spec("cruise");
         let (radius, _) = spec("workspace_radius");
-        let mut tr = Trajectory::new(period, [0.0; 2]);
-        let mut tick: u64 = 0;
-        let mut pos = [0.0f64; 2];
-        while tick < ticks {
-            if rng.random::<f64>() < pause_p {
-                tick += ((uniform(rng, pause_lo, pause_hi) / period).round() as u64).max(1);
+        let mut m = Mover {
+            tr: Trajectory::new(period, [0.0; 2]),
+            tick: 0,
+            pos: [0.0; 2],
+            vel: [0.0; 2],
+        };
+        while m.tick < ticks {
+            if rng.random::<f64>() < change_p {
+                let speed = uniform(rng, cruise_speed_lo, cruise_speed_hi);
+                let mut angle = uniform(rng, 0.0, TAU);
+                if m.pos[0].hypot(m.pos[1]) > radius / 4.0 {
+                    angle = (-m.pos[1]).atan2(-m.pos[0]) + uniform(rng, -PI / 6.0, PI / 6.0);
+                }
+                let a = log_uniform(rng, gentle_lo, gentle_hi);
+                m.ramp_to([speed * angle.cos(), speed * angle.sin()], a);
+                // Cruise at most a quarter of the radius.
+                let mut cruise = uniform(rng, cruise_lo, cruise_hi);
+                if speed > 0.0 {
+                    cruise = cruise.min(radius / 4.0 / speed);
+                }
+                m.hold(((cruise / period).round() as u64).max(1));
+                continue;
             }
-            let mut angle = uniform(rng, 0.0, std::f64::consts::TAU);
+            if m.vel != [0.0; 2] {
+                let a = log_uniform(rng, gentle_lo, gentle_hi);
+                m.ramp_to([0.0; 2], a);
+            }
+            if rng.random::<f64>() < pause_p {
+                m.hold(((uniform(rng, pause_lo, pause_hi) / period).round() as u64).max(1));
+            }
+            let mut angle = uniform(rng, 0.0, TAU);
             let dist = uniform(rng, dist_lo, dist_hi);
             let speed = uniform(rng, speed_lo, speed_hi);
-            let acc = (uniform(rng, acc_lo.ln(), acc_hi.ln())).exp();
-            let target = [pos[0] + dist * angle.cos(), pos[1] + dist * angle.sin()];
-            if (target[0] * target[0] + target[1] * target[1]).sqrt() > radius {
-                angle = (-pos[1]).atan2(-pos[0]);
+            let acc = log_uniform(rng, acc_lo, acc_hi);
+            let target = [m.pos[0] + dist * angle.cos(), m.pos[1] + dist * angle.sin()];
+            if target[0].hypot(target[1]) > radius {
+                angle = (-m.pos[1]).atan2(-m.pos[0]);
             }
-            let dir = [angle.cos(), angle.sin()];
-            // Trapezoid: accelerate for n_acc ticks, cruise n_cruise ticks, decelerate.
-            let mut v = speed;
-            let mut n_acc = ((v / acc / period).round() as u64).max(1);
-            let mut a = v / (n_acc as f64 * period);
-            if v * n_acc as f64 * period > dist {
-                // Too short to reach the speed: triangular profile.
-                v = (dist * a).sqrt();
-                n_acc = ((v / a / period).round() as u64).max(1);
-                a = v / (n_acc as f64 * period);
-            }
-            let t_acc = n_acc as f64 * period;
-            let cruise = ((dist - v * t_acc) / v).max(0.0);
-            let n_cruise = (cruise / period).round() as u64;
-            tr.set_accel(tick, [a * dir[0], a * dir[1]]);
-            tr.set_accel(tick + n_acc, [0.0; 2]);
-            tr.set_accel(tick + n_acc + n_cruise, [-a * dir[0], -a * dir[1]]);
-            tr.set_accel(tick + 2 * n_acc + n_cruise, [0.0; 2]);
-            let travelled = v * t_acc + v * n_cruise as f64 * period;
-            pos = [pos[0] + travelled * dir[0], pos[1] + travelled * dir[1]];
-            tick += 2 * n_acc + n_cruise;
+            m.point_to_point([angle.cos(), angle.sin()], dist, speed, acc);
         }
-        tr
+        if m.vel != [0.0; 2] {
+            m.ramp_to([0.0; 2], gentle_hi);
+        }
+        m.tr
+    }
+}
+
+/// Builds a free-motion trajectory piece by piece, keeping track of where the command is.
+struct Mover {
+    tr: Trajectory,
+    /// The tick the next piece starts at.
+    tick: u64,
+    /// The commanded position and velocity there.
+    pos: [f64; 2],
+    vel: [f64; 2],
+}
+
+impl Mover {
+    /// Holds the velocity (no acceleration) for `n` ticks.
+    fn hold(&mut self, n: u64) {
+        self.accelerate([0.0; 2], n);
+    }
+
+    /// Accelerates by `a` for `n` ticks.
+    fn accelerate(&mut self, a: [f64; 2], n: u64) {
+        self.tr.set_accel(self.tick, a);
+        let t = n as f64 * self.tr.period;
+        for ((p, v), a) in self.pos.iter_mut().zip(&mut self.vel).zip(a) {
+            *p += *v * t + 0.5 * a * t * t;
+            *v += a * t;
+        }
+        self.tick += n;
+    }
+
+    /// Ramps the velocity to `v` at acceleration `a` (whole ticks, the last one exact),
+    /// then holds it.
+    fn ramp_to(&mut self, v: [f64; 2], a: f64) {
+        let dv = [v[0] - self.vel[0], v[1] - self.vel[1]];
+        let n = ((dv[0].hypot(dv[1]) / a / self.tr.period).round() as u64).max(1);
+        let t = n as f64 * self.tr.period;
+        self.accelerate([dv[0] / t, dv[1] / t], n);
+        self.vel = v;
+        self.tr.set_accel(self.tick, [0.0; 2]);
+    }
+
+    /// A move from rest of length `dist` along the unit vector `dir`: accelerate at about
+    /// `acc` to `speed` (or less, for a short move), cruise, decelerate to rest.
+    fn point_to_point(&mut self, dir: [f64; 2], dist: f64, speed: f64, acc: f64) {
+        let period = self.tr.period;
+        let mut v = speed;
+        let mut n_acc = ((v / acc / period).round() as u64).max(1);
+        let mut a = v / (n_acc as f64 * period);
+        if v * n_acc as f64 * period > dist {
+            // Too short to reach the speed: triangular profile.
+            v = (dist * a).sqrt();
+            n_acc = ((v / a / period).round() as u64).max(1);
+            a = v / (n_acc as f64 * period);
+        }
+        let t_acc = n_acc as f64 * period;
+        let n_cruise = (((dist - v * t_acc) / v).max(0.0) / period).round() as u64;
+        self.accelerate([a * dir[0], a * dir[1]], n_acc);
+        self.hold(n_cruise);
+        self.accelerate([-a * dir[0], -a * dir[1]], n_acc);
+        self.vel = [0.0; 2];
+        self.tr.set_accel(self.tick, [0.0; 2]);
     }
 }
 
