@@ -4,7 +4,7 @@
 //! which puts the detector in service or, when it cannot run, the fallback.
 
 use detector_core::{Detector, DetectorTick, ImageError};
-use fingertip_can::{NodeId, ResetReason, Transmitter};
+use fingertip_can::{BusFormat, NodeId, ResetReason, Transmitter};
 
 use crate::checksum::crc32;
 use crate::engine::{Engine, EngineParams, Fallback, FallbackReason, Service};
@@ -21,10 +21,11 @@ pub use consts::{CONFIG_CHECKSUM, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MH
 pub const RATE_HZ: u32 = ((TRIGGER_RATE_MHZ + 500) / 1000) as u32;
 
 /// The fallback's heartbeat: the protocol's default period, in samples.
-const FALLBACK_TRANSMITTER: Transmitter = match Transmitter::with_defaults(NODE_ID, RATE_HZ) {
-    Ok(t) => t,
-    Err(_) => panic!("build.rs checks the rate"),
-};
+const FALLBACK_TRANSMITTER: Transmitter =
+    match Transmitter::with_defaults(NODE_ID, BusFormat::Fd, RATE_HZ) {
+        Ok(t) => t,
+        Err(_) => panic!("build.rs checks the rate"),
+    };
 
 /// The built detector as an image (see `detector_core::image`), made by `build.rs`.
 pub static DETECTOR_IMAGE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/detector.image"));
@@ -197,12 +198,17 @@ mod tests {
             messages.iter().all(|m| matches!(m, Message::Status(_))),
             "no event, no confidence: {messages:?}"
         );
-        let health: Vec<_> = messages
+        let pages: Vec<StatusPage> = messages
             .iter()
             .filter_map(|m| match m {
-                Message::Status(StatusPage::Health { faults, phase, .. }) => {
-                    Some((*faults, *phase))
-                }
+                Message::Status(s) => Some(s.page),
+                _ => None,
+            })
+            .collect();
+        let health: Vec<_> = pages
+            .iter()
+            .filter_map(|p| match p {
+                StatusPage::Health { faults, phase, .. } => Some((*faults, *phase)),
                 _ => None,
             })
             .collect();
@@ -213,13 +219,12 @@ mod tests {
                 .iter()
                 .all(|(f, p)| f.contains(FaultFlags::CONFIG_FALLBACK) && p.is_none())
         );
-        assert!(messages.contains(&Message::Status(StatusPage::Config {
-            checksum: image_crc,
-            tx_dropped: 0
-        })));
-        assert!(messages.iter().any(|m| matches!(
-            m,
-            Message::Status(StatusPage::Timing { tick_rate_hz, .. }) if u32::from(*tick_rate_hz) == RATE_HZ
+        assert!(pages.contains(&StatusPage::Config {
+            checksum: image_crc
+        }));
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity { tick_rate_hz, .. } if u32::from(*tick_rate_hz) == RATE_HZ
         )));
     }
 
@@ -232,10 +237,10 @@ mod tests {
         assert_eq!(service.rate_hz(), RATE_HZ);
         let (messages, checked_in) = run(&mut service);
         assert!(checked_in);
-        assert!(messages.iter().any(|m| matches!(m, Message::Confidence(_))));
+        assert!(messages.iter().any(|m| matches!(m, Message::Stream(_))));
         assert!(!messages.iter().any(|m| matches!(
             m,
-            Message::Status(StatusPage::Health { faults, .. }) if faults.contains(FaultFlags::CONFIG_FALLBACK)
+            Message::Status(s) if matches!(s.page, StatusPage::Health { faults, .. } if faults.contains(FaultFlags::CONFIG_FALLBACK))
         )));
     }
 

@@ -19,8 +19,8 @@
 
 use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
 use fingertip_can::{
-    CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status,
-    Transmitter, TxConfigError, TxFrames, TxState,
+    BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError,
+    Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 use crate::channel_set::ChannelSet;
@@ -74,6 +74,8 @@ impl ChannelMap {
 pub struct EngineParams {
     /// This fingertip's node id.
     pub node: NodeId,
+    /// The bus format.
+    pub format: BusFormat,
     /// Why the board last reset (reported in every heartbeat).
     pub reset: ResetReason,
     /// The CRC-32 of the image the detector was loaded from
@@ -92,6 +94,7 @@ impl EngineParams {
     pub const fn new(node: NodeId, reset: ResetReason, image_crc: u32) -> EngineParams {
         EngineParams {
             node,
+            format: BusFormat::Fd,
             reset,
             image_crc,
             context_timeout_ms: 20,
@@ -186,7 +189,7 @@ pub struct TickResult {
 
 /// The flags a heartbeat reports as "since the last heartbeat".
 pub const LATCHED_FLAGS: FaultFlags =
-    FaultFlags(FaultFlags::OVERRUN.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
+    FaultFlags(FaultFlags::LATE.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
 
 fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
     ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
@@ -200,12 +203,12 @@ fn is_status(frame: &CanFrame) -> bool {
 /// Copies the board's health into `status`: counters, the latched flags, the sensor
 /// fault (a faulty analog channel of `sample`, or the temperature sensor).
 fn report_health(status: &mut Status, health: &Health, sample: &AdcSample, tx_dropped: u32) {
-    status.overruns = health.overruns;
+    status.late_ticks = health.overruns;
     status.worst_tick = health.worst_tick;
     status.bus_errors = health.bus_errors;
     status.tx_dropped = health.tx_dropped.saturating_add(tx_dropped);
     for flag in [
-        FaultFlags::OVERRUN,
+        FaultFlags::LATE,
         FaultFlags::BUS_ERROR,
         FaultFlags::TX_DROPPED,
     ] {
@@ -263,8 +266,8 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             ms_to_ticks(params.phase_timeout_ms, rate_hz),
         )
         .map_err(EngineError::Receiver)?;
-        let transmitter =
-            Transmitter::with_defaults(params.node, rate_hz).map_err(EngineError::Transmitter)?;
+        let transmitter = Transmitter::with_defaults(params.node, params.format, rate_hz)
+            .map_err(EngineError::Transmitter)?;
         let status = Status {
             reset: params.reset,
             tick_rate_hz: rate_hz as u16,
@@ -558,7 +561,7 @@ impl TickRunner {
         }
         let previous_worst = self.timing.worst();
         if self.timing.record(cycles().wrapping_sub(start)) {
-            shared.raise(FaultFlags::OVERRUN);
+            shared.raise(FaultFlags::LATE);
         }
         if self.timing.worst() != previous_worst {
             self.worst_tenths = cycles_to_tenths_us(self.timing.worst(), self.core_hz);
@@ -586,7 +589,8 @@ mod tests {
     use crate::shared::Shared;
     use detector_core::{Level, Signal};
     use fingertip_can::{
-        ContextMsg, Counter, EventMsg, Message, PhaseMsg, StatusPage, TipStateMsg,
+        Address, ContextGroup, ContextMsg, ContextPart, ContextPartMsg, ContextSlot, Counter,
+        EventMsg, Message, PhaseMsg, StatusPage,
     };
 
     /// A small configuration of our own, so these tests check the plumbing whatever the
@@ -683,20 +687,29 @@ mod tests {
             .expect("accepted");
     }
 
-    fn context(counter: u8, vx: f64) -> CanFrame {
-        ContextMsg {
-            counter: Counter::new(counter).unwrap(),
+    /// The broadcast context frame of the node's group, sent at tick `now` (the
+    /// controller's clock in step), with the node's slot: velocity `vx` (m/s) and position
+    /// error `x` (m) along the normal.
+    fn context(now: Tick, counter: u8, vx: f64, x: f64) -> CanFrame {
+        let mut m = ContextMsg {
+            counter: Counter(counter),
+            time_us: now.wrapping_mul(200),
+            ..ContextMsg::default()
+        };
+        m.slots[ContextGroup::slot_of(node())] = Some(ContextSlot {
             vel_des: [(vx / 1e-4) as i16, 0],
             acc_des: [0, 0],
-        }
-        .encode(node())
-        .unwrap()
+            pos_err: [(x / 1e-6) as i16, 0],
+        });
+        m.encode(ContextGroup::of(node())).unwrap()
     }
 
-    fn tip_state(counter: u8, x: f64) -> CanFrame {
-        TipStateMsg {
-            counter: Counter::new(counter).unwrap(),
-            pos_err: [(x / 1e-6) as i16, 0],
+    /// A classic context part frame for the node.
+    fn part(counter: u8, part: ContextPart, value: [i16; 2]) -> CanFrame {
+        ContextPartMsg {
+            counter: Counter(counter),
+            part,
+            value,
         }
         .encode(node())
         .unwrap()
@@ -704,7 +717,7 @@ mod tests {
 
     fn phase(counter: u8, index: u8, sequence: u8) -> CanFrame {
         PhaseMsg {
-            counter: Counter::new(counter).unwrap(),
+            counter: Counter(counter),
             phase: index,
             sequence,
         }
@@ -717,8 +730,19 @@ mod tests {
             .iter()
             .map(|f| {
                 let (n, m) = Message::decode(f.id().into(), f.data()).expect("our frames decode");
-                assert_eq!(n, node());
+                assert_eq!(n, Address::Node(node()));
                 m
+            })
+            .collect()
+    }
+
+    /// The status pages among `frames`.
+    fn status_pages(frames: &TxFrames) -> Vec<StatusPage> {
+        decode(frames)
+            .into_iter()
+            .filter_map(|m| match m {
+                Message::Status(s) => Some(s.page),
+                _ => None,
             })
             .collect()
     }
@@ -733,10 +757,9 @@ mod tests {
             .collect()
     }
 
-    /// Fresh context (5 cm/s) and tip state (no error) at `now`.
+    /// Fresh context (5 cm/s, no position error) at `now`.
     fn fresh<T: DetectorTick>(shared: &RxShared, e: &Engine<'_, T>, now: Tick, counter: u8) {
-        deliver(shared, e, now, context(counter, 0.05));
-        deliver(shared, e, now, tip_state(counter, 0.0));
+        deliver(shared, e, now, context(now, counter, 0.05, 0.0));
     }
 
     #[test]
@@ -783,12 +806,10 @@ mod tests {
         assert!(r.output.decisions.is_empty(), "no event is invented");
         // The first tick sends the stream and the heartbeat at once.
         assert!(r.heartbeat);
-        let (reset, faults) = decode(&r.frames)
+        let (reset, faults) = status_pages(&r.frames)
             .iter()
-            .find_map(|m| match m {
-                Message::Status(StatusPage::Health { reset, faults, .. }) => {
-                    Some((*reset, *faults))
-                }
+            .find_map(|p| match p {
+                StatusPage::Health { reset, faults, .. } => Some((*reset, *faults)),
                 _ => None,
             })
             .expect("a health page");
@@ -867,7 +888,9 @@ mod tests {
         let d = detector();
         let mut e = engine(&d);
         let shared = RxShared::new();
-        deliver(&shared, &e, 0, context(0, 0.05));
+        // Classic CAN: velocity and acceleration came, the position error did not.
+        deliver(&shared, &e, 0, part(0, ContextPart::Velocity, [500, 0]));
+        deliver(&shared, &e, 0, part(1, ContextPart::Acceleration, [0, 0]));
         let r = e.tick(&sample(1, 0.0, 0.0), &shared, &Health::default());
         // bump reads pos_err_x in one of its two sensor terms.
         assert_eq!((r.output.unjudgeable, r.output.degraded), (0, BUMP));
@@ -931,45 +954,51 @@ mod tests {
             worst_tick: 2_345,
             bus_errors: 2,
             tx_dropped: 5,
-            latched: FaultFlags::OVERRUN | FaultFlags::TX_DROPPED,
+            latched: FaultFlags::LATE | FaultFlags::TX_DROPPED,
             sensor_fault: true,
         };
-        let (mut timing, mut faults, mut config, mut beats) = (None, None, None, 0);
-        // Pages 1..=5 come round once every five heartbeats (50 ms each).
-        for t in 0..(5 * 250 + 1) {
+        let (mut pages, mut faults, mut beats) = (Vec::new(), None, 0);
+        // Pages 1..=10 come round once every ten heartbeats (50 ms each).
+        for t in 0..(10 * 250 + 1) {
             let r = e.tick(&sample(t, 0.0, 0.0), &shared, &health);
             beats += usize::from(r.heartbeat);
-            for m in decode(&r.frames) {
-                match m {
-                    Message::Status(StatusPage::Health { faults: f, .. }) => faults = Some(f),
-                    Message::Status(p @ StatusPage::Timing { .. }) => timing = Some(p),
-                    Message::Status(p @ StatusPage::Config { .. }) => config = Some(p),
-                    _ => {}
+            for p in status_pages(&r.frames) {
+                match p {
+                    StatusPage::Health { faults: f, .. } => faults = Some(f),
+                    p => pages.push(p),
                 }
             }
         }
-        assert_eq!(beats, 6);
+        assert_eq!(beats, 11);
         let f = faults.unwrap();
-        assert!(
-            f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT)
-        );
+        assert!(f.contains(FaultFlags::LATE | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT));
         assert!(!f.contains(FaultFlags::BUS_ERROR));
-        assert!(matches!(
-            timing,
-            Some(StatusPage::Timing {
-                overruns: 3,
+        for want in [
+            StatusPage::Lateness {
+                worst: 0,
+                late_ticks: 3,
+            },
+            StatusPage::Compute {
                 worst_tick: 2_345,
+                lost_scans: 0,
+            },
+            StatusPage::Bus {
+                bus_errors: 2,
+                tx_dropped: 5,
+            },
+            StatusPage::Config {
+                checksum: 0xDEAD_BEEF,
+            },
+        ] {
+            assert!(pages.contains(&want), "{want:?} not in {pages:?}");
+        }
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity {
                 tick_rate_hz: 5000,
                 ..
-            })
-        ));
-        assert!(matches!(
-            config,
-            Some(StatusPage::Config {
-                checksum: 0xDEAD_BEEF,
-                tx_dropped: 5
-            })
-        ));
+            }
+        )));
     }
 
     #[test]
@@ -985,7 +1014,7 @@ mod tests {
             let r = e.tick(&sample(t, 0.0, 0.0), &shared, &Health::default());
             if decode(&r.frames)
                 .iter()
-                .any(|m| matches!(m, Message::Confidence(_)))
+                .any(|m| matches!(m, Message::Stream(_)))
             {
                 stream_ticks.push(t);
             }
@@ -1050,10 +1079,9 @@ mod tests {
                     (&rx_a, &interpreted.receiver()),
                     (&rx_b, &generated.receiver()),
                 ] {
-                    for f in [context(counter, 0.05), tip_state(counter, err)] {
-                        rx.with(|s| e.receive(s, now, f.id().into(), f.data()))
-                            .expect("accepted");
-                    }
+                    let f = context(k, counter, 0.05, err);
+                    rx.with(|s| e.receive(s, now, f.id().into(), f.data()))
+                        .expect("accepted");
                 }
             }
             let push = k % 500 >= 250;
@@ -1125,7 +1153,7 @@ mod tests {
         assert!(
             h.detector
                 .latched()
-                .contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED)
+                .contains(FaultFlags::LATE | FaultFlags::TX_DROPPED)
         );
         assert_eq!(h.can_rx.now(), 0);
         assert!(h.watchdog.round(Task::Detector as u8));
@@ -1139,16 +1167,13 @@ mod tests {
                 |_| true,
             );
             if r.heartbeat {
-                reported = decode(&r.frames).into_iter().find_map(|m| match m {
-                    Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
-                    _ => None,
-                });
+                reported = health_flags(&r.frames);
             }
         }
         let f = reported.expect("a heartbeat at tick 250");
-        assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED));
-        // Every tick overran again, so OVERRUN is latched anew; TX_DROPPED was cleared.
-        assert!(h.detector.latched().contains(FaultFlags::OVERRUN));
+        assert!(f.contains(FaultFlags::LATE | FaultFlags::TX_DROPPED));
+        // Every tick overran again, so LATE is latched anew; TX_DROPPED was cleared.
+        assert!(h.detector.latched().contains(FaultFlags::LATE));
         assert!(!h.detector.latched().contains(FaultFlags::TX_DROPPED));
         assert_eq!(h.can_rx.now(), 250);
         // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
@@ -1158,8 +1183,8 @@ mod tests {
 
     /// The health page of the heartbeat among `frames`, if any.
     fn health_flags(frames: &TxFrames) -> Option<FaultFlags> {
-        decode(frames).into_iter().find_map(|m| match m {
-            Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
+        status_pages(frames).into_iter().find_map(|p| match p {
+            StatusPage::Health { faults, .. } => Some(faults),
             _ => None,
         })
     }
@@ -1251,7 +1276,7 @@ mod tests {
 
     #[test]
     fn the_fallback_sends_heartbeats_only_with_its_flag_and_the_boards_faults() {
-        let transmitter = Transmitter::with_defaults(node(), 5000).unwrap();
+        let transmitter = Transmitter::with_defaults(node(), BusFormat::Fd, 5000).unwrap();
         let reason = FallbackReason::Image(ImageError::Magic);
         let mut service: Service<'_, Detector> =
             Service::Fallback(Fallback::new(transmitter, &params(), 5000), reason);
@@ -1268,44 +1293,45 @@ mod tests {
         let mut s = sample(0, -1.0, 50.0);
         s.faults = ChannelSet::from_bits(0b0100);
         let health = Health {
-            latched: FaultFlags::OVERRUN,
+            latched: FaultFlags::LATE,
             ..Health::default()
         };
-        let mut pages = Vec::new();
+        let mut messages = Vec::new();
         for t in 0..=500 {
             s.tick = t;
             let r = service.tick(&s, &shared, &health);
             assert_eq!(r.output, Output::default());
             assert_eq!(r.heartbeat, t % 250 == 0);
-            pages.extend(decode(&r.frames));
+            messages.extend(decode(&r.frames));
         }
         assert_eq!(
-            pages.len(),
+            messages.len(),
             6,
             "two status pages per heartbeat, nothing else"
         );
-        assert!(
-            pages.iter().all(|m| matches!(m, Message::Status(_))),
-            "{pages:?}"
-        );
+        let pages: Vec<StatusPage> = messages
+            .iter()
+            .map(|m| match m {
+                Message::Status(s) => s.page,
+                other => panic!("{other:?}"),
+            })
+            .collect();
         assert_eq!(
             pages[0],
-            Message::Status(StatusPage::Health {
+            StatusPage::Health {
                 reset: ResetReason::PowerOn,
-                faults: FaultFlags::CONFIG_FALLBACK
-                    | FaultFlags::OVERRUN
-                    | FaultFlags::SENSOR_FAULT,
-                uptime: 0,
                 phase: None,
+                faults: FaultFlags::CONFIG_FALLBACK | FaultFlags::LATE | FaultFlags::SENSOR_FAULT,
                 phase_seq: 0,
-            })
+            }
         );
+        assert_eq!(pages[1], StatusPage::Uptime { uptime: 0 });
         assert!(matches!(
-            pages[1],
-            Message::Status(StatusPage::Timing {
+            pages[3],
+            StatusPage::Identity {
                 tick_rate_hz: 5000,
                 ..
-            })
+            }
         ));
         assert_eq!(service.status().config_checksum, 0xDEAD_BEEF);
     }

@@ -93,8 +93,10 @@ const I2C_TIMEOUT_MS: u32 = 5;
 const SENSOR_TRIP: u8 = 3;
 /// CAN error-state polling period.
 const CAN_SUPERVISOR_PERIOD: Duration = Duration::from_millis(2);
-/// The CAN bit rate.
+/// The CAN bit rate of the arbitration phase.
 const CAN_BITRATE: u32 = 1_000_000;
+/// The CAN FD data-phase bit rate (bit-rate switching).
+const CAN_DATA_BITRATE: u32 = 5_000_000;
 /// The FDCAN kernel clock: PLL Q, see [`clocks`].
 const CAN_CLOCK_HZ: u32 = 85_000_000;
 /// The bit timing: 85 quanta of one kernel clock, sample point at 87 % (CiA recommends
@@ -104,6 +106,13 @@ const CAN_TIMING: can_timing::BitTiming = match can_timing::nominal(CAN_CLOCK_HZ
     Ok(t) => t,
     Err(_) => panic!("the FDCAN clock cannot make the CAN bit rate"),
 };
+/// The data phase: the nominal time quantum, 17 quanta per bit at 5 Mbit/s, sample point
+/// at 76 %.
+const CAN_DATA_TIMING: can_timing::BitTiming =
+    match can_timing::data(CAN_CLOCK_HZ, CAN_DATA_BITRATE, CAN_TIMING.prescaler, 750) {
+        Ok(t) => t,
+        Err(_) => panic!("the FDCAN clock cannot make the CAN FD data rate"),
+    };
 
 /// Clocks: 24 MHz crystal (the fingertip board and the NUCLEO-G474RE alike) / 6 × 85 =
 /// 340 MHz VCO; R / 2 = 170 MHz SYSCLK (boost mode); Q / 4 = 85 MHz for the FDCAN
@@ -268,50 +277,56 @@ fn setup() -> Board {
     );
     let sensor = Tmp117::new(i2c, Delay, tmp117::DEFAULT_ADDRESS, I2C_TIMEOUT_MS);
 
-    // FDCAN1, classic CAN at 1 Mbit/s. Only this node's three receive identifiers are
-    // accepted, in hardware; bus-off recovery is the supervisor's (with back-off), not
-    // the HAL's immediate one.
+    // FDCAN1, CAN FD at 1 Mbit/s arbitration and 5 Mbit/s data. Only this node's receive
+    // identifiers are accepted, in hardware; bus-off recovery is the supervisor's (with
+    // back-off), not the HAL's immediate one.
     let mut can = CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs);
-    let (Some(prescaler), Some(seg1), Some(seg2), Some(sync_jump_width)) = (
-        NonZeroU16::new(CAN_TIMING.prescaler),
-        NonZeroU8::new(CAN_TIMING.seg1),
-        NonZeroU8::new(CAN_TIMING.seg2),
-        NonZeroU8::new(CAN_TIMING.sjw),
-    ) else {
-        defmt::panic!("CAN bit timing has a zero field");
-    };
+    let field = |v: u8| NonZeroU8::new(v).unwrap_or(NonZeroU8::MIN);
+    let prescaler = |v: u16| NonZeroU16::new(v).unwrap_or(NonZeroU16::MIN);
     can.set_config(
         can.config()
             .set_nominal_bit_timing(can::config::NominalBitTiming {
-                prescaler,
-                seg1,
-                seg2,
-                sync_jump_width,
+                prescaler: prescaler(CAN_TIMING.prescaler),
+                seg1: field(CAN_TIMING.seg1),
+                seg2: field(CAN_TIMING.seg2),
+                sync_jump_width: field(CAN_TIMING.sjw),
             })
+            .set_data_bit_timing(can::config::DataBitTiming {
+                transceiver_delay_compensation: true,
+                prescaler: prescaler(CAN_DATA_TIMING.prescaler),
+                seg1: field(CAN_DATA_TIMING.seg1),
+                seg2: field(CAN_DATA_TIMING.seg2),
+                sync_jump_width: field(CAN_DATA_TIMING.sjw),
+            })
+            .set_frame_transmit(can::config::FrameTransmissionConfig::AllowFdCanAndBRS)
             .set_automatic_bus_off_recovery(false)
             .set_global_filter(can::config::GlobalFilter::reject_all()),
     );
     info!(
-        "CAN {=u32} bit/s: {=u32} quanta per bit, sample point {=u32} per mille",
+        "CAN FD {=u32}/{=u32} bit/s: {=u32}/{=u32} quanta per bit, sample points {=u32}/{=u32} per mille",
         CAN_BITRATE,
+        CAN_DATA_BITRATE,
         CAN_TIMING.quanta(),
-        CAN_TIMING.sample_point_permille()
+        CAN_DATA_TIMING.quanta(),
+        CAN_TIMING.sample_point_permille(),
+        CAN_DATA_TIMING.sample_point_permille()
     );
-    {
+    if let Some(r) = &receiver {
         use can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
-        use fingertip_can::MessageKind;
-        let id = |k: MessageKind| k.id(boot::NODE_ID);
+        let [phase, context, part] = r.identifiers().map(|raw| {
+            fingertip_can::StandardId::new(raw).unwrap_or(fingertip_can::StandardId::ZERO)
+        });
         can.properties().set_standard_filter(
             StandardFilterSlot::_0,
             StandardFilter {
-                filter: FilterType::DedicatedDual(id(MessageKind::Phase), id(MessageKind::Context)),
+                filter: FilterType::DedicatedDual(phase, context),
                 action: Action::StoreInFifo0,
             },
         );
         can.properties().set_standard_filter(
             StandardFilterSlot::_1,
             StandardFilter {
-                filter: FilterType::DedicatedSingle(id(MessageKind::TipState)),
+                filter: FilterType::DedicatedSingle(part),
                 action: Action::StoreInFifo0,
             },
         );
@@ -448,7 +463,7 @@ async fn temperature(
 #[embassy_executor::task]
 async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHandle<'static>) {
     loop {
-        match rx.read().await {
+        match rx.read_fd().await {
             Ok(envelope) => {
                 let now = shared.now();
                 let frame = &envelope.frame;
@@ -470,9 +485,15 @@ async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHan
 async fn can_tx(mut tx: CanTx<'static>, mut shared: CanTxHandle<'static>) {
     loop {
         let frame = TX_FRAMES.receive().await;
-        let lost = match can::Frame::new_standard(frame.id().as_raw(), frame.data()) {
+        let (id, len) = (frame.id().into(), frame.len() as u8);
+        let header = if frame.is_fd() {
+            can::frame::Header::new_fd(id, len, false, true)
+        } else {
+            can::frame::Header::new(id, len, false)
+        };
+        let lost = match can::frame::FdFrame::new(header, frame.data()) {
             // A lower-priority frame pending in the controller was replaced by this one.
-            Ok(f) => tx.write(&f).await.is_some(),
+            Ok(f) => tx.write_fd(&f).await.is_some(),
             Err(_) => true,
         };
         if lost {

@@ -29,7 +29,7 @@
 //! the interleaving.
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicU16, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -48,11 +48,11 @@ pub type RawMutex = CriticalSectionRawMutex;
 /// last heartbeat": overrun, bus error, frame dropped), until the detector task takes
 /// them.
 #[derive(Debug, Default)]
-struct Latch(AtomicU8);
+struct Latch(AtomicU16);
 
 impl Latch {
     const fn new() -> Latch {
-        Latch(AtomicU8::new(0))
+        Latch(AtomicU16::new(0))
     }
 
     fn raise(&self, flags: FaultFlags) {
@@ -286,7 +286,7 @@ impl SamplerHandle<'_> {
     /// The DMA overran the reader: counted, and latched for the next heartbeat.
     pub fn adc_overrun(&mut self) {
         self.0.counters.adc_overruns.add(1);
-        self.0.latched.raise(FaultFlags::OVERRUN);
+        self.0.latched.raise(FaultFlags::LATE);
     }
 
     /// The sampler is alive.
@@ -448,7 +448,7 @@ mod tests {
         let mut h = s.split();
         h.sampler.adc_overrun();
         let seen = h.detector.latched();
-        assert_eq!(seen, FaultFlags::OVERRUN);
+        assert_eq!(seen, FaultFlags::LATE);
         // Raised after the heartbeat read the flags: kept for the next one.
         h.bus.bus_error();
         h.detector.clear_reported(seen);
@@ -525,7 +525,11 @@ mod tests {
         let mut h = s.split();
         h.detector.set_now(42);
         assert_eq!(h.can_rx.now(), 42);
-        assert!(h.can_rx.rx().with(|rx| rx.link().context().is_none()));
+        assert!(
+            h.can_rx
+                .rx()
+                .with(|rx| rx.link().controller_time().is_none())
+        );
         h.sampler.check_in();
         h.detector.check_in();
         assert!(h.watchdog.round(Task::CRITICAL));
