@@ -174,8 +174,8 @@ mod tests {
                 &mut h.detector,
                 || 0,
                 |f| {
-                    sent.push(f);
-                    true
+                    sent.extend_from_slice(f);
+                    crate::txqueue::Pushed::default()
                 },
             );
             if t % 250 == 249 {

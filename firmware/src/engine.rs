@@ -27,6 +27,7 @@ use crate::channel_set::ChannelSet;
 use crate::sampling::AdcSample;
 use crate::shared::{DetectorHandle, RxShared};
 use crate::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
+use crate::txqueue::Pushed;
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
 /// Where the board's inputs go in the configuration's channel order: `None` for an
@@ -500,16 +501,18 @@ impl<'d, T: DetectorTick> Service<'d, T> {
 }
 
 /// The detector task's bookkeeping around [`Service::tick`]: publishing the tick, timing
-/// it, counting overruns and refused frames, and clearing the latched flags a heartbeat
-/// reported (once its frames are queued). The board supplies the cycle counter and the
-/// frame queue.
+/// it, counting overruns, flagging frames not sent, and clearing the latched flags a
+/// heartbeat reported (once its frames are queued). The board supplies the cycle counter
+/// and the transmit path ([`crate::txqueue`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TickRunner {
     timing: TickTiming,
     core_hz: u32,
     worst_tenths: u16,
-    queue_full: u32,
+    /// Frames the transmit path had not sent (refused, pushed out, flushed) as of the
+    /// last tick.
+    tx_lost: u32,
 }
 
 impl TickRunner {
@@ -519,19 +522,20 @@ impl TickRunner {
             timing: TickTiming::new(budget_cycles(core_hz, rate_hz)),
             core_hz,
             worst_tenths: 0,
-            queue_full: 0,
+            tx_lost: 0,
         }
     }
 
     /// One tick. `cycles` reads the free-running cycle counter (it may wrap); `send`
-    /// queues a frame for the CAN controller and returns `false` when the queue is full.
+    /// queues the tick's frames on the transmit path and says what it did with them
+    /// ([`TxScheduler::push`](crate::txqueue::TxScheduler::push), then a pump).
     pub fn step<T: DetectorTick>(
         &mut self,
         service: &mut Service<'_, T>,
         sample: &AdcSample,
         shared: &mut DetectorHandle<'_>,
         cycles: impl Fn() -> u32,
-        mut send: impl FnMut(CanFrame) -> bool,
+        send: impl FnOnce(&[CanFrame]) -> Pushed,
     ) -> TickResult {
         // The receive task stamps frames with this tick: never newer than the tick being
         // judged (the receiver would read a negative age as stale).
@@ -542,21 +546,19 @@ impl TickRunner {
             overruns: self.timing.overruns(),
             worst_tick: self.worst_tenths,
             bus_errors: counters.bus_errors(),
-            tx_dropped: self.queue_full.saturating_add(counters.tx_lost.get()),
+            tx_dropped: self.tx_lost,
             latched: shared.latched(),
             sensor_fault: shared.sensor_fault(),
         };
         let result = service.tick(sample, shared.rx(), &health);
-        let mut status_refused = false;
-        for frame in result.frames.iter() {
-            if !send(*frame) {
-                self.queue_full = self.queue_full.saturating_add(1);
-                shared.raise(FaultFlags::TX_DROPPED);
-                status_refused |= is_status(frame);
-            }
+        let pushed = send(&result.frames);
+        // Frames refused now, or lost since (flushed after bus-off): flagged.
+        if pushed.lost != self.tx_lost {
+            self.tx_lost = pushed.lost;
+            shared.raise(FaultFlags::TX_DROPPED);
         }
         // A heartbeat the queue refused reported nothing: its flags wait for the next.
-        if result.heartbeat && !status_refused {
+        if result.heartbeat && !pushed.status_lost {
             shared.clear_reported(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
         let previous_worst = self.timing.worst();
@@ -575,9 +577,10 @@ impl TickRunner {
         &self.timing
     }
 
-    /// Frames the queue refused since boot.
-    pub const fn queue_full(&self) -> u32 {
-        self.queue_full
+    /// Frames the transmit path had not sent as of the last tick (refused, pushed out,
+    /// flushed).
+    pub const fn tx_lost(&self) -> u32 {
+        self.tx_lost
     }
 }
 
@@ -1136,15 +1139,16 @@ mod tests {
             now
         };
         // The first tick sends the stream and a heartbeat; the queue refuses everything.
-        let r = runner.step(
-            &mut e,
-            &sample(0, 0.0, 0.0),
-            &mut h.detector,
-            cycles,
-            |_| false,
-        );
+        let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &mut h.detector, cycles, |f| {
+            Pushed {
+                refused: f.len() as u32,
+                status_lost: true,
+                lost: f.len() as u32,
+            }
+        });
         assert!(r.heartbeat);
-        assert_eq!(runner.queue_full(), r.frames.len() as u32);
+        let refused = r.frames.len() as u32;
+        assert_eq!(runner.tx_lost(), refused);
         assert_eq!(
             (runner.timing().overruns(), runner.timing().worst()),
             (1, 40_000)
@@ -1164,7 +1168,10 @@ mod tests {
                 &sample(t, 0.0, 0.0),
                 &mut h.detector,
                 cycles,
-                |_| true,
+                |_| Pushed {
+                    lost: refused,
+                    ..Pushed::default()
+                },
             );
             if r.heartbeat {
                 reported = health_flags(&r.frames);
@@ -1189,17 +1196,32 @@ mod tests {
         })
     }
 
-    /// Runs the ticks `ticks` with quiet samples and every frame sent; the health flags of
-    /// the heartbeats among them, in order.
+    /// A transmit path that takes every frame of the tick, having lost `lost` since boot.
+    fn lost(lost: u32) -> Pushed {
+        Pushed {
+            lost,
+            ..Pushed::default()
+        }
+    }
+
+    /// Runs the ticks `ticks` with quiet samples and every frame taken (`lost_before`
+    /// lost before); the health flags of the heartbeats among them, in order.
     fn quiet_heartbeats(
         runner: &mut TickRunner,
         service: &mut Service<'_, Detector>,
         handle: &mut DetectorHandle<'_>,
         ticks: core::ops::RangeInclusive<Tick>,
+        lost_before: u32,
     ) -> Vec<FaultFlags> {
         ticks
             .filter_map(|t| {
-                let r = runner.step(service, &sample(t, 0.0, 0.0), handle, || 0, |_| true);
+                let r = runner.step(
+                    service,
+                    &sample(t, 0.0, 0.0),
+                    handle,
+                    || 0,
+                    |_| lost(lost_before),
+                );
                 health_flags(&r.frames)
             })
             .collect()
@@ -1219,34 +1241,31 @@ mod tests {
             &sample(0, 0.0, 0.0),
             &mut h.detector,
             cycles,
-            |_| true,
+            |_| lost(0),
         );
-        // A frame lost before the next heartbeat (at tick 250) ...
-        h.can_tx.frame_lost();
+        // A frame lost before the next heartbeat (at tick 250; flushed after a bus-off,
+        // say) ...
         for t in 1..250 {
             runner.step(
                 &mut e,
                 &sample(t, 0.0, 0.0),
                 &mut h.detector,
                 cycles,
-                |_| true,
+                |_| lost(1),
             );
         }
-        // ... is reported by it; while that heartbeat is being queued, the transmit task
-        // loses another frame: the same flag, raised between the read and the clear.
+        // ... is reported by it; while that heartbeat is being queued, another frame is
+        // lost: the same flag, raised between the read and the clear.
         let r = runner.step(
             &mut e,
             &sample(250, 0.0, 0.0),
             &mut h.detector,
             cycles,
-            |_| {
-                h.can_tx.frame_lost();
-                true
-            },
+            |_| lost(2),
         );
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::TX_DROPPED)));
         // The next heartbeat reports the second loss, and the one after has nothing new.
-        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 251..=750);
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 251..=750, 2);
         assert_eq!(reported.len(), 2);
         assert!(reported[0].contains(FaultFlags::TX_DROPPED));
         assert!(!reported[1].contains(FaultFlags::TX_DROPPED));
@@ -1264,10 +1283,15 @@ mod tests {
         // The first tick's heartbeat reports the bus error, but the queue refuses the
         // status frames.
         let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &mut h.detector, cycles, |f| {
-            !is_status(&f)
+            let refused = f.iter().filter(|f| is_status(f)).count() as u32;
+            Pushed {
+                refused,
+                status_lost: true,
+                lost: refused,
+            }
         });
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::BUS_ERROR)));
-        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 1..=250);
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 1..=250, 2);
         // Reported again at the next heartbeat, with the refused frames' own flag.
         assert_eq!(reported.len(), 1);
         assert!(reported[0].contains(FaultFlags::BUS_ERROR | FaultFlags::TX_DROPPED));

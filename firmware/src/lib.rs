@@ -17,4 +17,5 @@ pub mod supervise;
 pub mod timing;
 pub mod tmp117;
 pub mod trigger;
+pub mod txqueue;
 pub mod wiring;

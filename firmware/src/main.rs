@@ -6,9 +6,11 @@
 //!   delivers them a block at a time; calibrated samples go to the detector's queue;
 //! - `detector_task`: one [`Service::tick`] per sample (the engine, or the fallback when
 //!   the embedded detector cannot run), timed with the DWT cycle counter; its frames go
-//!   to the CAN transmit queue;
+//!   straight to the transmit path ([`TxScheduler`]) and into the FDCAN's buffers;
 //! - `temperature`: the TMP117 over I2C2, four times a second; publishes the temperature;
-//! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
+//! - `can_rx`, `can_supervisor`: FDCAN1 (CAN FD at 1 and 5 Mbit/s), the receive path,
+//!   bus-off recovery and the flush of stale frames; the FDCAN's interrupt pumps the
+//!   transmit path as buffers free up;
 //! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
 //!
 //! Everything worth testing lives in the lib; this file is wiring, and `regs` holds its
@@ -26,31 +28,34 @@ use cortex_m_rt::entry;
 use defmt::{error, info, warn};
 use embassy_executor::{Executor, Spawner};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
-use embassy_stm32::can::{self, CanConfigurator, CanRx, CanTx, Properties};
+use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
 use embassy_stm32::i2c::{self, I2c, Master};
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::{ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, FDCAN1, I2C2, IWDG, TIM6};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma};
+use embassy_stm32::{bind_interrupts, dma, interrupt};
+use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::channel::Channel;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
+use core::cell::RefCell;
 use detector_core::Detector;
-use fingertip_can::{CanFrame, Receiver, ResetReason};
+use fingertip_can::{Receiver, ResetReason};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{Service, TickRunner};
 use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
 use firmware::shared::{
-    BusHandle, CanRxHandle, CanTxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
+    BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
     TemperatureHandle, WatchdogHandle,
 };
 use firmware::supervise::{BusAction, BusSupervisor, Task};
 use firmware::timing::budget_cycles;
 use firmware::tmp117::{self, SensorHealth, Tmp117};
+use firmware::txqueue::TxScheduler;
 use firmware::wiring::CORE_CLOCK_HZ;
 use firmware::{calib, can_timing, reset};
 
@@ -60,18 +65,30 @@ bind_interrupts!(struct Irqs {
     DMA1_CHANNEL3 => dma::InterruptHandler<DMA1_CH3>;
     I2C2_EV => i2c::EventInterruptHandler<I2C2>;
     I2C2_ER => i2c::ErrorInterruptHandler<I2C2>;
-    FDCAN1_IT0 => can::IT0InterruptHandler<FDCAN1>;
+    FDCAN1_IT0 => can::IT0InterruptHandler<FDCAN1>, TxPump;
     FDCAN1_IT1 => can::IT1InterruptHandler<FDCAN1>;
 });
 
 /// Samples waiting for the detector: 16 ticks (3.2 ms at 5 kHz), three blocks of slack
 /// behind the one being processed.
 const SAMPLE_QUEUE: usize = 16;
-/// Frames waiting for the CAN controller: a whole tick's worst case, and then some.
-const TX_QUEUE: usize = 24;
-
 static SAMPLES: Channel<RawMutex, AdcSample, SAMPLE_QUEUE> = Channel::new();
-static TX_FRAMES: Channel<RawMutex, CanFrame, TX_QUEUE> = Channel::new();
+
+/// The transmit path: the detector task queues each tick's frames and fills the FDCAN's
+/// buffers, the FDCAN's interrupt refills them as they free up, the supervisor flushes it
+/// after bus-off. Held for the few microseconds of a push or a pump.
+static TX: Mutex<RawMutex, RefCell<TxScheduler>> = Mutex::new(RefCell::new(TxScheduler::new()));
+
+/// Pumps the transmit path from the FDCAN's interrupt (bound after the HAL's handler):
+/// a frame went out, or a cancellation finished.
+struct TxPump;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::FDCAN1_IT0> for TxPump {
+    unsafe fn on_interrupt() {
+        regs::clear_cancel_interrupt();
+        TX.lock(|t| t.borrow_mut().pump(&mut regs::FdcanTx));
+    }
+}
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
@@ -162,7 +179,6 @@ struct Board {
     timer: Timer<'static, TIM6>,
     sampler: Sampler,
     sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
-    can_tx: CanTx<'static>,
     can_rx: CanRx<'static>,
     can_properties: Properties,
     watchdog: IndependentWatchdog<'static, IWDG>,
@@ -179,7 +195,6 @@ fn main() -> ! {
         detector,
         temperature: sensor_handle,
         can_rx: can_rx_handle,
-        can_tx: can_tx_handle,
         bus,
         watchdog,
     } = b.handles;
@@ -191,7 +206,6 @@ fn main() -> ! {
         if let Some(receiver) = b.receiver {
             spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
         }
-        spawn!(spawner, can_tx(b.can_tx, can_tx_handle));
         spawn!(spawner, can_supervisor(b.can_properties, bus));
         spawn!(spawner, watchdog_task(b.watchdog, watchdog));
     })
@@ -332,6 +346,10 @@ fn setup() -> Board {
         );
     }
     let (can_tx_half, can_rx_half, properties) = can.into_normal_mode().split();
+    // The transmit buffers are the transmit path's (`regs::FdcanTx`); the HAL's transmit
+    // half stays unused but alive: dropping both halves switches the peripheral off.
+    core::mem::forget(can_tx_half);
+    regs::enable_cancel_interrupt();
 
     let watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
 
@@ -344,7 +362,6 @@ fn setup() -> Board {
         timer,
         sampler: Sampler::new(calib::NOMINAL, rate_hz),
         sensor,
-        can_tx: can_tx_half,
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
@@ -407,8 +424,13 @@ async fn detector_task(
     let detector = service.detector();
     loop {
         let sample = SAMPLES.receive().await;
-        let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |f| {
-            TX_FRAMES.try_send(f).is_ok()
+        let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |frames| {
+            TX.lock(|t| {
+                let mut t = t.borrow_mut();
+                let pushed = t.push(frames);
+                t.pump(&mut regs::FdcanTx);
+                pushed
+            })
         });
 
         // Logs, after the timed part.
@@ -480,29 +502,9 @@ async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHan
     }
 }
 
-/// Sends the queued frames, in order.
-#[embassy_executor::task]
-async fn can_tx(mut tx: CanTx<'static>, mut shared: CanTxHandle<'static>) {
-    loop {
-        let frame = TX_FRAMES.receive().await;
-        let (id, len) = (frame.id().into(), frame.len() as u8);
-        let header = if frame.is_fd() {
-            can::frame::Header::new_fd(id, len, false, true)
-        } else {
-            can::frame::Header::new(id, len, false)
-        };
-        let lost = match can::frame::FdFrame::new(header, frame.data()) {
-            // A lower-priority frame pending in the controller was replaced by this one.
-            Ok(f) => tx.write_fd(&f).await.is_some(),
-            Err(_) => true,
-        };
-        if lost {
-            shared.frame_lost();
-        }
-    }
-}
-
-/// Watches the controller's error state; lets it out of bus-off after a back-off.
+/// Watches the controller's error state; flushes the transmit path when the bus goes off
+/// (what was queued is stale by the time it comes back) and lets the controller out of
+/// bus-off after a back-off.
 #[embassy_executor::task]
 async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) {
     let mut supervisor = BusSupervisor::new();
@@ -514,8 +516,12 @@ async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) 
         if status.protocol_error {
             protocol_errors = protocol_errors.saturating_add(1);
         }
-        let events = supervisor.error_events();
-        if supervisor.poll(Instant::now().as_millis(), state) == BusAction::Recover {
+        let (events, bus_offs) = (supervisor.error_events(), supervisor.bus_off());
+        let action = supervisor.poll(Instant::now().as_millis(), state);
+        if supervisor.bus_off() != bus_offs {
+            TX.lock(|t| t.borrow_mut().flush(&mut regs::FdcanTx));
+        }
+        if action == BusAction::Recover {
             regs::fdcan_recover();
         }
         if supervisor.error_events() != events {

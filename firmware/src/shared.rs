@@ -11,7 +11,6 @@
 //! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
 //! | [`TemperatureHandle`] | the temperature ([`Watch`]), its counters (sensor errors, timeouts) | — |
 //! | [`CanRxHandle`] | its counters (frames, protocol errors) | the detector's tick |
-//! | [`CanTxHandle`] | its counter (frames lost), the frame-dropped flag | — |
 //! | [`BusHandle`] | its counters (bus-off, bus state events), the bus-error flag | — |
 //! | [`WatchdogHandle`] | starts the check-in rounds | the check-ins |
 //!
@@ -120,8 +119,6 @@ pub struct Counters {
     /// last protocol error code and clears it when read, so each error is seen by at
     /// most one of the two readers and the sum is a lower bound.
     pub rx_protocol_errors: Counter,
-    /// Frames the CAN transmit task could not send (mailbox replaced) (CAN transmit).
-    pub tx_lost: Counter,
     /// Received frames handed to the receiver (CAN receive).
     pub rx_frames: Counter,
 }
@@ -145,7 +142,6 @@ impl Counters {
             bus_off: Counter::new(),
             bus_state_events: Counter::new(),
             rx_protocol_errors: Counter::new(),
-            tx_lost: Counter::new(),
             rx_frames: Counter::new(),
         }
     }
@@ -218,8 +214,6 @@ pub struct Handles<'a> {
     pub temperature: TemperatureHandle<'a>,
     /// The CAN receive task's.
     pub can_rx: CanRxHandle<'a>,
-    /// The CAN transmit task's.
-    pub can_tx: CanTxHandle<'a>,
     /// The CAN supervisor's.
     pub bus: BusHandle<'a>,
     /// The watchdog task's.
@@ -251,7 +245,6 @@ impl Shared {
             },
             temperature: TemperatureHandle(s),
             can_rx: CanRxHandle(s),
-            can_tx: CanTxHandle(s),
             bus: BusHandle(s),
             watchdog: WatchdogHandle(s),
         }
@@ -396,17 +389,6 @@ impl<'a> CanRxHandle<'a> {
     }
 }
 
-/// The CAN transmit task's handle.
-pub struct CanTxHandle<'a>(&'a Shared);
-
-impl CanTxHandle<'_> {
-    /// A frame could not be sent: counted, and latched for the next heartbeat.
-    pub fn frame_lost(&mut self) {
-        self.0.counters.tx_lost.add(1);
-        self.0.latched.raise(FaultFlags::TX_DROPPED);
-    }
-}
-
 /// The CAN supervisor's handle.
 pub struct BusHandle<'a>(&'a Shared);
 
@@ -454,28 +436,27 @@ mod tests {
         h.detector.clear_reported(seen);
         assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
         h.detector.clear_reported(FaultFlags::BUS_ERROR);
-        h.can_tx.frame_lost();
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
+        h.bus.bus_error();
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
         // Not reported yet (no heartbeat cleared it): still there at the next look.
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
-        let c = h.detector.counters();
-        assert_eq!((c.tx_lost.get(), c.adc_overruns.get()), (1, 1));
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
+        assert_eq!(h.detector.counters().adc_overruns.get(), 1);
     }
 
     #[test]
     fn a_flag_raised_again_between_the_read_and_the_clear_is_kept() {
         let mut s = Shared::new();
         let mut h = s.split();
-        h.can_tx.frame_lost();
-        // A heartbeat is built with the frame-dropped flag ...
+        h.bus.bus_error();
+        // A heartbeat is built with the bus-error flag ...
         let reported = h.detector.latched();
-        assert_eq!(reported, FaultFlags::TX_DROPPED);
-        // ... another frame is lost before the clear: the same flag, raised again ...
-        h.can_tx.frame_lost();
+        assert_eq!(reported, FaultFlags::BUS_ERROR);
+        // ... the bus errs again before the clear: the same flag, raised again ...
+        h.bus.bus_error();
         h.detector.clear_reported(reported);
         // ... and the next heartbeat reports it.
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
-        h.detector.clear_reported(FaultFlags::TX_DROPPED);
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
+        h.detector.clear_reported(FaultFlags::BUS_ERROR);
         assert_eq!(h.detector.latched(), FaultFlags(0));
     }
 
