@@ -26,7 +26,7 @@ use fingertip_can::{
 use crate::channel_set::ChannelSet;
 use crate::sampling::AdcSample;
 use crate::shared::{DetectorHandle, RxShared};
-use crate::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
+use crate::timing::{Lateness, TickTiming, budget_cycles, cycles_to_tenths_us};
 use crate::txqueue::Pushed;
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
@@ -162,15 +162,19 @@ impl core::fmt::Display for FallbackReason {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Health {
-    /// Ticks that overran their period since boot.
-    pub overruns: u32,
-    /// Longest tick so far, 0.1 µs.
+    /// Longest time from a sample's conversion to the end of its tick so far, 0.1 µs.
+    pub worst_lateness: u16,
+    /// Ticks that ended after their deadline since boot.
+    pub late_ticks: u32,
+    /// Longest tick computation so far, 0.1 µs.
     pub worst_tick: u16,
+    /// Scans lost since boot (overwritten before the detector read them).
+    pub lost_scans: u32,
     /// CAN error events since boot.
     pub bus_errors: u32,
-    /// Frames not sent since boot (queue full, mailbox replaced).
+    /// Frames not sent since boot (refused, pushed out, flushed after bus-off).
     pub tx_dropped: u32,
-    /// Flags latched and not yet reported (overrun, bus error, frame dropped).
+    /// Flags latched and not yet reported (late, bus error, frame dropped).
     pub latched: FaultFlags,
     /// The temperature sensor is faulty.
     pub sensor_fault: bool,
@@ -204,8 +208,10 @@ fn is_status(frame: &CanFrame) -> bool {
 /// Copies the board's health into `status`: counters, the latched flags, the sensor
 /// fault (a faulty analog channel of `sample`, or the temperature sensor).
 fn report_health(status: &mut Status, health: &Health, sample: &AdcSample, tx_dropped: u32) {
-    status.late_ticks = health.overruns;
+    status.worst_lateness = health.worst_lateness;
+    status.late_ticks = health.late_ticks;
     status.worst_tick = health.worst_tick;
+    status.lost_scans = health.lost_scans;
     status.bus_errors = health.bus_errors;
     status.tx_dropped = health.tx_dropped.saturating_add(tx_dropped);
     for flag in [
@@ -501,33 +507,44 @@ impl<'d, T: DetectorTick> Service<'d, T> {
 }
 
 /// The detector task's bookkeeping around [`Service::tick`]: publishing the tick, timing
-/// it, counting overruns, flagging frames not sent, and clearing the latched flags a
-/// heartbeat reported (once its frames are queued). The board supplies the cycle counter
-/// and the transmit path ([`crate::txqueue`]).
+/// its computation and its lateness (from the sample's conversion to the end of the tick,
+/// frames queued and in the transmit buffers included), flagging late ticks, lost scans
+/// and frames not sent, and clearing the latched flags a heartbeat reported (once its
+/// frames are queued). The board supplies the cycle counter and the transmit path
+/// ([`crate::txqueue`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TickRunner {
     timing: TickTiming,
+    lateness: Lateness,
     core_hz: u32,
     worst_tenths: u16,
+    worst_late_tenths: u16,
+    lost_scans: u32,
     /// Frames the transmit path had not sent (refused, pushed out, flushed) as of the
     /// last tick.
     tx_lost: u32,
 }
 
 impl TickRunner {
-    /// Bookkeeping for a detector at `rate_hz` on a core clocked at `core_hz`.
+    /// Bookkeeping for a detector at `rate_hz` on a core clocked at `core_hz`; a tick is
+    /// late when it ends more than one period after its sample's conversion.
     pub const fn new(core_hz: u32, rate_hz: u32) -> TickRunner {
+        let period = budget_cycles(core_hz, rate_hz);
         TickRunner {
-            timing: TickTiming::new(budget_cycles(core_hz, rate_hz)),
+            timing: TickTiming::new(period),
+            lateness: Lateness::new(period),
             core_hz,
             worst_tenths: 0,
+            worst_late_tenths: 0,
+            lost_scans: 0,
             tx_lost: 0,
         }
     }
 
-    /// One tick. `cycles` reads the free-running cycle counter (it may wrap); `send`
-    /// queues the tick's frames on the transmit path and says what it did with them
+    /// One tick on `sample` (its `converted_at` on the same cycle counter). `cycles` reads
+    /// the free-running cycle counter (it may wrap); `send` queues the tick's frames on the
+    /// transmit path and says what it did with them
     /// ([`TxScheduler::push`](crate::txqueue::TxScheduler::push), then a pump).
     pub fn step<T: DetectorTick>(
         &mut self,
@@ -542,9 +559,16 @@ impl TickRunner {
         shared.set_now(sample.tick);
         let start = cycles();
         let counters = shared.counters();
+        let lost_scans = counters.lost_samples.get();
+        if lost_scans != self.lost_scans {
+            self.lost_scans = lost_scans;
+            shared.raise(FaultFlags::LATE);
+        }
         let health = Health {
-            overruns: self.timing.overruns(),
+            worst_lateness: self.worst_late_tenths,
+            late_ticks: self.lateness.late(),
             worst_tick: self.worst_tenths,
+            lost_scans,
             bus_errors: counters.bus_errors(),
             tx_dropped: self.tx_lost,
             latched: shared.latched(),
@@ -561,15 +585,25 @@ impl TickRunner {
         if result.heartbeat && !pushed.status_lost {
             shared.clear_reported(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
-        let previous_worst = self.timing.worst();
-        if self.timing.record(cycles().wrapping_sub(start)) {
+        let end = cycles();
+        let previous = (self.timing.worst(), self.lateness.worst());
+        self.timing.record(end.wrapping_sub(start));
+        if self.lateness.record(end.wrapping_sub(sample.converted_at)) {
             shared.raise(FaultFlags::LATE);
         }
-        if self.timing.worst() != previous_worst {
+        if self.timing.worst() != previous.0 {
             self.worst_tenths = cycles_to_tenths_us(self.timing.worst(), self.core_hz);
+        }
+        if self.lateness.worst() != previous.1 {
+            self.worst_late_tenths = cycles_to_tenths_us(self.lateness.worst(), self.core_hz);
         }
         shared.check_in();
         result
+    }
+
+    /// The ticks' lateness so far.
+    pub const fn lateness(&self) -> &Lateness {
+        &self.lateness
     }
 
     /// The tick timing so far.
@@ -953,8 +987,10 @@ mod tests {
         let mut e = engine(&d);
         let shared = RxShared::new();
         let health = Health {
-            overruns: 3,
+            worst_lateness: 1_234,
+            late_ticks: 3,
             worst_tick: 2_345,
+            lost_scans: 7,
             bus_errors: 2,
             tx_dropped: 5,
             latched: FaultFlags::LATE | FaultFlags::TX_DROPPED,
@@ -978,12 +1014,12 @@ mod tests {
         assert!(!f.contains(FaultFlags::BUS_ERROR));
         for want in [
             StatusPage::Lateness {
-                worst: 0,
+                worst: 1_234,
                 late_ticks: 3,
             },
             StatusPage::Compute {
                 worst_tick: 2_345,
-                lost_scans: 0,
+                lost_scans: 7,
             },
             StatusPage::Bus {
                 bus_errors: 2,
@@ -1122,7 +1158,7 @@ mod tests {
     }
 
     #[test]
-    fn the_runner_times_ticks_counts_overruns_and_refused_frames() {
+    fn the_runner_times_ticks_measures_lateness_and_flags_refused_frames() {
         use crate::supervise::Task;
         use core::cell::Cell;
         let d = detector();
@@ -1131,27 +1167,31 @@ mod tests {
         let mut h = shared.split();
         let mut runner = TickRunner::new(170_000_000, 5000);
         // A cycle counter near its wrap that advances 40 000 cycles per read: every tick
-        // overruns its 34 000.
+        // computes longer than its 34 000, and ends 45 000 after its sample's conversion.
         let clock = Cell::new(u32::MAX - 10_000);
         let cycles = || {
             let now = clock.get();
             clock.set(now.wrapping_add(40_000));
             now
         };
+        let converted = |t: Tick| AdcSample {
+            converted_at: clock.get().wrapping_sub(5_000),
+            ..sample(t, 0.0, 0.0)
+        };
         // The first tick sends the stream and a heartbeat; the queue refuses everything.
-        let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &mut h.detector, cycles, |f| {
-            Pushed {
-                refused: f.len() as u32,
-                status_lost: true,
-                lost: f.len() as u32,
-            }
+        let s0 = converted(0);
+        let r = runner.step(&mut e, &s0, &mut h.detector, cycles, |f| Pushed {
+            refused: f.len() as u32,
+            status_lost: true,
+            lost: f.len() as u32,
         });
         assert!(r.heartbeat);
         let refused = r.frames.len() as u32;
         assert_eq!(runner.tx_lost(), refused);
+        assert_eq!(runner.timing().worst(), 40_000);
         assert_eq!(
-            (runner.timing().overruns(), runner.timing().worst()),
-            (1, 40_000)
+            (runner.lateness().worst(), runner.lateness().late()),
+            (45_000, 1)
         );
         // Latched after the heartbeat was built: reported by the next one.
         assert!(
@@ -1163,29 +1203,62 @@ mod tests {
         assert!(h.watchdog.round(Task::Detector as u8));
         let mut reported = None;
         for t in 1..=250 {
-            let r = runner.step(
-                &mut e,
-                &sample(t, 0.0, 0.0),
-                &mut h.detector,
-                cycles,
-                |_| Pushed {
-                    lost: refused,
-                    ..Pushed::default()
-                },
-            );
+            let st = converted(t);
+            let r = runner.step(&mut e, &st, &mut h.detector, cycles, |_| Pushed {
+                lost: refused,
+                ..Pushed::default()
+            });
             if r.heartbeat {
                 reported = health_flags(&r.frames);
             }
         }
         let f = reported.expect("a heartbeat at tick 250");
         assert!(f.contains(FaultFlags::LATE | FaultFlags::TX_DROPPED));
-        // Every tick overran again, so LATE is latched anew; TX_DROPPED was cleared.
+        // Every tick was late again, so LATE is latched anew; TX_DROPPED was cleared.
         assert!(h.detector.latched().contains(FaultFlags::LATE));
         assert!(!h.detector.latched().contains(FaultFlags::TX_DROPPED));
         assert_eq!(h.can_rx.now(), 250);
-        // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
-        assert_eq!(e.status().worst_tick, 2352);
-        assert_eq!(runner.timing().overruns(), 251);
+        // 40 000 cycles at 170 MHz = 235.2 µs, 45 000 = 264.7 µs, reported from the second
+        // tick on.
+        assert_eq!(
+            (e.status().worst_tick, e.status().worst_lateness),
+            (2352, 2647)
+        );
+        assert_eq!(
+            (runner.lateness().late(), e.status().late_ticks),
+            (251, 250)
+        );
+    }
+
+    #[test]
+    fn a_prompt_tick_is_not_late_but_lost_scans_are_flagged() {
+        let d = detector();
+        let mut e = Service::Running(engine(&d));
+        let mut shared = Shared::new();
+        let mut h = shared.split();
+        let mut runner = TickRunner::new(170_000_000, 5000);
+        // Ends 20 000 cycles (118 µs) after its sample's conversion: within the period.
+        let s = AdcSample {
+            converted_at: 1_000,
+            ..sample(0, 0.0, 0.0)
+        };
+        runner.step(&mut e, &s, &mut h.detector, || 21_000, |_| lost(0));
+        assert_eq!(
+            (runner.lateness().late(), runner.lateness().worst()),
+            (0, 20_000)
+        );
+        assert!(!h.detector.latched().contains(FaultFlags::LATE));
+        // The sampler lost two scans: flagged at the next tick, counted in the status.
+        h.sampler.set_lost_samples(2);
+        runner.step(
+            &mut e,
+            &AdcSample { tick: 3, ..s },
+            &mut h.detector,
+            || 21_000,
+            |_| lost(0),
+        );
+        assert!(h.detector.latched().contains(FaultFlags::LATE));
+        assert_eq!(e.status().lost_scans, 2);
     }
 
     /// The health page of the heartbeat among `frames`, if any.

@@ -1,17 +1,22 @@
 //! The board binary: clocks, peripherals and the embassy tasks around the lib.
 //!
-//! Tasks, each owning its peripheral and talking through the queues and its handle on
-//! the [`Shared`] state (what it writes, it owns):
-//! - `sampler_task`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
-//!   delivers them a block at a time; calibrated samples go to the detector's queue;
-//! - `detector_task`: one [`Service::tick`] per sample (the engine, or the fallback when
-//!   the embedded detector cannot run), timed with the DWT cycle counter; its frames go
-//!   straight to the transmit path ([`TxScheduler`]) and into the FDCAN's buffers;
+//! Tasks, each owning its peripheral and talking through its handle on the [`Shared`]
+//! state (what it writes, it owns):
+//! - `detector_task`, on an interrupt executor above every other task: TIM6 triggers an
+//!   ADC1 scan every detector tick into a DMA ring of two scans; the DMA's interrupt
+//!   counts the scans from its position ([`ScanProgress`]) and wakes the task, which reads
+//!   the newest scan, calibrates it and runs one [`Service::tick`] on it (the engine, or
+//!   the fallback when the embedded detector cannot run); its frames go straight to the
+//!   transmit path ([`TxScheduler`]) and into the FDCAN's buffers; it measures each tick's
+//!   computation and lateness with the DWT cycle counter;
 //! - `temperature`: the TMP117 over I2C2, four times a second; publishes the temperature;
 //! - `can_rx`, `can_supervisor`: FDCAN1 (CAN FD at 1 and 5 Mbit/s), the receive path,
 //!   bus-off recovery and the flush of stale frames; the FDCAN's interrupt pumps the
 //!   transmit path as buffers free up;
-//! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
+//! - `watchdog_task`: refreshes the IWDG while scans arrive and ticks complete.
+//!
+//! The CAN, temperature and watchdog tasks run on the thread executor, below the
+//! detector: none of them can hold a tick back.
 //!
 //! Everything worth testing lives in the lib; this file is wiring, and `regs` holds its
 //! raw register accesses.
@@ -23,13 +28,16 @@ mod regs;
 
 use core::num::{NonZeroU8, NonZeroU16};
 
+use core::cell::UnsafeCell;
 use cortex_m::peripheral::DWT;
 use cortex_m_rt::entry;
 use defmt::{error, info, warn};
-use embassy_executor::{Executor, Spawner};
+
+use embassy_executor::{Executor, InterruptExecutor, Spawner};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
 use embassy_stm32::i2c::{self, I2c, Master};
+use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::{ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, FDCAN1, I2C2, IWDG, TIM6};
 use embassy_stm32::time::Hertz;
@@ -37,17 +45,18 @@ use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt};
 use embassy_sync::blocking_mutex::Mutex;
-use embassy_sync::channel::Channel;
+use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
 use core::cell::RefCell;
 use detector_core::Detector;
+use detector_core::Tick;
 use fingertip_can::{Receiver, ResetReason};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{Service, TickRunner};
-use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
+use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
 use firmware::shared::{
     BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
     TemperatureHandle, WatchdogHandle,
@@ -60,7 +69,7 @@ use firmware::wiring::CORE_CLOCK_HZ;
 use firmware::{calib, can_timing, reset};
 
 bind_interrupts!(struct Irqs {
-    DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
+    DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>, ScanIrq;
     DMA1_CHANNEL2 => dma::InterruptHandler<DMA1_CH2>;
     DMA1_CHANNEL3 => dma::InterruptHandler<DMA1_CH3>;
     I2C2_EV => i2c::EventInterruptHandler<I2C2>;
@@ -69,10 +78,47 @@ bind_interrupts!(struct Irqs {
     FDCAN1_IT1 => can::IT1InterruptHandler<FDCAN1>;
 });
 
-/// Samples waiting for the detector: 16 ticks (3.2 ms at 5 kHz), three blocks of slack
-/// behind the one being processed.
-const SAMPLE_QUEUE: usize = 16;
-static SAMPLES: Channel<RawMutex, AdcSample, SAMPLE_QUEUE> = Channel::new();
+/// The DMA's circular buffer of two scans. Handed to the HAL once, which runs the DMA on
+/// it and never reads it (its `read` is never called); the detector task reads each scan
+/// from it with volatile loads while the DMA writes the other slot.
+struct DmaBuffer(UnsafeCell<[u16; DMA_LEN]>);
+
+// SAFETY: the DMA writes it and the detector task reads it, each in its own slot at a time
+// (`ScanPicker::torn` catches a read the DMA overtook); no reference to it is used after
+// the HAL takes it at boot.
+unsafe impl Sync for DmaBuffer {}
+
+static ADC_DMA: DmaBuffer = DmaBuffer(UnsafeCell::new([0; DMA_LEN]));
+
+/// The DMA's progress, counted in scans by its interrupt: the detector's tick numbers.
+static SCANS: ScanProgress = ScanProgress::new();
+/// Raised by the DMA's interrupt when a scan completes; the detector task waits on it.
+static SCAN_READY: Signal<RawMutex, ()> = Signal::new();
+
+/// Counts the scans from the DMA's position at each of its interrupts (bound after the
+/// HAL's handler, which acknowledges them), and wakes the detector.
+struct ScanIrq;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::DMA1_CHANNEL1> for ScanIrq {
+    unsafe fn on_interrupt() {
+        if SCANS.on_dma(regs::adc_dma_remaining(), DWT::cycle_count()) {
+            SCAN_READY.signal(());
+        }
+    }
+}
+
+/// The detector's executor, run from an interrupt the board does not otherwise use
+/// (UART4), at a priority below the DMA's and the FDCAN's interrupts and above every
+/// thread-mode task.
+static EXECUTOR_HIGH: InterruptExecutor = InterruptExecutor::new();
+/// Its priority.
+const DETECTOR_PRIORITY: Priority = Priority::P1;
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: UART4's vector belongs to the executor alone (the board has no UART4).
+    unsafe { EXECUTOR_HIGH.on_interrupt() }
+}
 
 /// The transmit path: the detector task queues each tick's frames and fills the FDCAN's
 /// buffers, the FDCAN's interrupt refills them as they free up, the supervisor flushes it
@@ -95,7 +141,6 @@ static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 static DETECTOR: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
 static SHARED: StaticCell<Shared> = StaticCell::new();
 static SERVICE: StaticCell<Service<'static, ApproachTick>> = StaticCell::new();
-static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// IWDG period: four missed 50 ms rounds of the watchdog task.
 const WATCHDOG_TIMEOUT_US: u32 = 200_000;
@@ -177,7 +222,7 @@ struct Board {
     receiver: Option<Receiver>,
     adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    sampler: Sampler,
+    front_end: FrontEnd,
     sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
     can_rx: CanRx<'static>,
     can_properties: Properties,
@@ -198,10 +243,24 @@ fn main() -> ! {
         bus,
         watchdog,
     } = b.handles;
+    interrupt::UART4.set_priority(DETECTOR_PRIORITY);
+    let high = EXECUTOR_HIGH.start(interrupt::UART4);
+    spawn!(
+        high,
+        detector_task(
+            b.service,
+            Scans {
+                adc: b.adc,
+                timer: b.timer,
+                front_end: b.front_end,
+                handle: sampler,
+            },
+            detector,
+            b.rate_hz,
+        )
+    );
     let executor = EXECUTOR.init(Executor::new());
     executor.run(move |spawner: Spawner| {
-        spawn!(spawner, detector_task(b.service, detector, b.rate_hz));
-        spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, sampler));
         spawn!(spawner, temperature(b.sensor, sensor_handle));
         if let Some(receiver) = b.receiver {
             spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
@@ -249,7 +308,8 @@ fn setup() -> Board {
     let receiver = service.receiver();
     let handles = SHARED.init_with(Shared::new).split();
 
-    // ADC1: the four analog channels, one scan per TIM6 update, circular DMA.
+    // ADC1: the four analog channels, one scan per TIM6 update, circular DMA over two
+    // scans (an interrupt per scan).
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let sequence = [
         (p.PA0.degrade_adc(), SampleTime::CYCLES47_5), // force_x
@@ -257,9 +317,11 @@ fn setup() -> Board {
         (p.PB0.degrade_adc(), SampleTime::CYCLES47_5), // skin_accel
         (p.PB1.degrade_adc(), SampleTime::CYCLES47_5), // stress_rate
     ];
+    // SAFETY: the only reference to the buffer ever made; see `DmaBuffer`.
+    let dma_buffer: &'static mut [u16; DMA_LEN] = unsafe { &mut *ADC_DMA.0.get() };
     let ring = adc.into_ring_buffered(
         p.DMA1_CH1,
-        ADC_DMA.init([0; DMA_LEN]),
+        dma_buffer,
         Irqs,
         sequence.into_iter(),
         embassy_stm32::triggers::TIM6_TRGO,
@@ -360,7 +422,7 @@ fn setup() -> Board {
         receiver,
         adc: ring,
         timer,
-        sampler: Sampler::new(calib::NOMINAL, rate_hz),
+        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
         sensor,
         can_rx: can_rx_half,
         can_properties: properties,
@@ -379,51 +441,59 @@ fn build_detector(reset: ResetReason) -> &'static mut Service<'static, ApproachT
     SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, reset))
 }
 
-/// Reads the ADC's DMA ring a block at a time and hands it to the lib's [`Sampler`].
-#[embassy_executor::task]
-async fn sampler_task(
-    mut adc: RingBufferedAdc<'static, ADC1>,
+/// The reading of the scans: the ADC and its trigger (kept alive for the DMA), the front
+/// end, the sampler's handle.
+struct Scans {
+    adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    mut sampler: Sampler,
-    mut shared: SamplerHandle<'static>,
-) {
-    let mut block = [0u16; BLOCK_LEN];
-    adc.start();
-    timer.start();
-    loop {
-        match adc.read(&mut block).await {
-            Ok(_) => {
-                let now = Instant::now().as_micros();
-                sampler.on_block(&block, now, shared.temperature(), |s| {
-                    SAMPLES.try_send(s).is_ok()
-                });
-                shared.set_lost_samples(sampler.clock.lost());
-                shared.set_rail_episodes(sampler.front_end.rail_episodes());
-                shared.set_stuck_episodes(sampler.front_end.stuck_episodes());
-                shared.check_in();
-            }
-            Err(_) => {
-                // The DMA lapped us; the ring restarts at the next aligned scan.
-                sampler.on_overrun();
-                shared.adc_overrun();
-            }
-        }
-    }
+    front_end: FrontEnd,
+    handle: SamplerHandle<'static>,
 }
 
-/// One service tick per sample (the engine, or the fallback's heartbeat), timed with the
-/// DWT cycle counter; frames to the CAN queue.
+/// Scan `tick` from its slot of the DMA's ring.
+fn read_scan(tick: Tick) -> [u16; SCAN_LEN] {
+    let base = tick as usize % DMA_SCANS * SCAN_LEN;
+    let ptr = ADC_DMA.0.get().cast::<u16>();
+    // SAFETY: `base + k` < DMA_LEN; the DMA writes the other slot meanwhile (see
+    // `DmaBuffer`), and a torn read is detected and dropped by the caller.
+    core::array::from_fn(|k| unsafe { ptr.add(base + k).read_volatile() })
+}
+
+/// One tick per scan, as the DMA delivers it: the newest scan (older ones the DMA has
+/// overtaken are counted lost), calibrated, then one service tick (the engine, or the
+/// fallback's heartbeat) whose frames go into the transmit buffers at once; computation
+/// and lateness timed with the DWT cycle counter.
 #[embassy_executor::task]
 async fn detector_task(
     service: &'static mut Service<'static, ApproachTick>,
+    mut scans: Scans,
     mut shared: DetectorHandle<'static>,
     rate_hz: u32,
 ) {
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
+    let mut picker = ScanPicker::new();
     let mut last_masks = (0u8, 0u8);
     let detector = service.detector();
+    scans.adc.start();
+    scans.timer.start();
     loop {
-        let sample = SAMPLES.receive().await;
+        SCAN_READY.wait().await;
+        let Some(tick) = picker.pick(SCANS.completed()) else {
+            continue;
+        };
+        let raw = read_scan(tick);
+        let torn = picker.torn(tick, SCANS.completed());
+        let h = &mut scans.handle;
+        h.set_lost_samples(picker.lost());
+        h.check_in();
+        if torn {
+            continue;
+        }
+        scans.front_end.set_temperature(h.temperature());
+        let mut sample = scans.front_end.process(tick, &raw);
+        sample.converted_at = SCANS.completed_at(tick);
+        h.set_rail_episodes(scans.front_end.rail_episodes());
+        h.set_stuck_episodes(scans.front_end.stuck_episodes());
         let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |frames| {
             TX.lock(|t| {
                 let mut t = t.borrow_mut();

@@ -18,6 +18,11 @@ pub fn take_reset_flags() -> u32 {
     csr
 }
 
+/// The ADC's DMA channel (DMA1 channel 1): transfers left before it wraps (CNDTR).
+pub fn adc_dma_remaining() -> u16 {
+    pac::DMA1.ch(0).ndtr().read().ndt()
+}
+
 /// Keeps the independent watchdog from firing while a debugger holds the core.
 pub fn freeze_watchdog_when_halted() {
     pac::DBGMCU.apb1lfzr().modify(|w| w.set_iwdg(true));

@@ -7,8 +7,11 @@
 //!
 //! | handle | writes | reads |
 //! |---|---|---|
-//! | [`SamplerHandle`] | its counters (lost samples, ADC overruns, rail and stuck-value episodes), the overrun flag, its check-in | the temperature |
-//! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
+//! | [`SamplerHandle`] | its counters (lost scans, rail and stuck-value episodes), its check-in | the temperature |
+//! | [`DetectorHandle`] | the detector's tick, the late and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
+//!
+//! The sampler's and the detector's handles belong to one task on the board (the detector
+//! reads each scan itself), kept apart for what each part owns.
 //! | [`TemperatureHandle`] | the temperature ([`Watch`]), its counters (sensor errors, timeouts) | — |
 //! | [`CanRxHandle`] | its counters (frames, protocol errors) | the detector's tick |
 //! | [`BusHandle`] | its counters (bus-off, bus state events), the bus-error flag | — |
@@ -97,11 +100,8 @@ impl Counter {
 /// Everything counted since boot (read-only: each counter's writer is its task's).
 #[derive(Debug, Default)]
 pub struct Counters {
-    /// Scans lost: DMA overruns and scans dropped because the detector's queue was full
-    /// (sampler).
+    /// Scans lost: overwritten in the DMA's ring before the detector read them (sampler).
     pub lost_samples: Counter,
-    /// DMA overruns of the ADC ring buffer (sampler).
-    pub adc_overruns: Counter,
     /// Stuck-at-rail episodes, all channels (sampler).
     pub rail_episodes: Counter,
     /// Stuck-value episodes (a channel frozen mid-scale), all channels (sampler).
@@ -134,7 +134,6 @@ impl Counters {
     const fn new() -> Counters {
         Counters {
             lost_samples: Counter::new(),
-            adc_overruns: Counter::new(),
             rail_episodes: Counter::new(),
             stuck_episodes: Counter::new(),
             sensor_errors: Counter::new(),
@@ -251,7 +250,7 @@ impl Shared {
     }
 }
 
-/// The sampler task's handle.
+/// The sampler's handle: the reading of the scans.
 pub struct SamplerHandle<'a>(&'a Shared);
 
 impl SamplerHandle<'_> {
@@ -274,12 +273,6 @@ impl SamplerHandle<'_> {
     /// Publishes the stuck-value episodes so far (the front end's count).
     pub fn set_stuck_episodes(&mut self, n: u32) {
         self.0.counters.stuck_episodes.set(n);
-    }
-
-    /// The DMA overran the reader: counted, and latched for the next heartbeat.
-    pub fn adc_overrun(&mut self) {
-        self.0.counters.adc_overruns.add(1);
-        self.0.latched.raise(FaultFlags::LATE);
     }
 
     /// The sampler is alive.
@@ -428,7 +421,7 @@ mod tests {
     fn latched_flags_survive_until_reported() {
         let mut s = Shared::new();
         let mut h = s.split();
-        h.sampler.adc_overrun();
+        h.detector.raise(FaultFlags::LATE);
         let seen = h.detector.latched();
         assert_eq!(seen, FaultFlags::LATE);
         // Raised after the heartbeat read the flags: kept for the next one.
@@ -440,7 +433,6 @@ mod tests {
         assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
         // Not reported yet (no heartbeat cleared it): still there at the next look.
         assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
-        assert_eq!(h.detector.counters().adc_overruns.get(), 1);
     }
 
     #[test]
