@@ -263,6 +263,11 @@ impl Transmitter {
         Transmitter::new(node, format, DEFAULT_STREAM_DECIMATION, hb)
     }
 
+    /// The same transmitter for node `node`.
+    pub const fn for_node(self, node: NodeId) -> Transmitter {
+        Transmitter { node, ..self }
+    }
+
     /// The node.
     pub const fn node(&self) -> NodeId {
         self.node

@@ -19,8 +19,8 @@
 
 use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
 use fingertip_can::{
-    BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError,
-    Status, Transmitter, TxConfigError, TxFrames, TxState,
+    BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
+    RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 use crate::channel_set::ChannelSet;
@@ -69,16 +69,47 @@ impl ChannelMap {
     }
 }
 
+/// What the board knows of itself at boot, reported in its status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BoardInfo {
+    /// This fingertip's node id.
+    pub node: NodeId,
+    /// Where the node id came from ([`crate::node_id`]).
+    pub node_source: NodeIdSource,
+    /// The bus format the firmware was built for.
+    pub format: BusFormat,
+    /// Why the board last reset (reported in every heartbeat).
+    pub reset: ResetReason,
+    /// The crystal did not start: the board runs from its internal oscillator
+    /// ([`FaultFlags::CLOCK_FALLBACK`] in every heartbeat).
+    pub clock_fallback: bool,
+}
+
+impl BoardInfo {
+    /// The status a service starts from: the board's identity, its permanent faults.
+    fn status(&self, tick_rate_hz: u16, image_crc: u32, faults: FaultFlags) -> Status {
+        let mut status = Status {
+            reset: self.reset,
+            node_source: self.node_source,
+            faults,
+            tick_rate_hz,
+            config_checksum: image_crc,
+            ..Status::default()
+        };
+        status
+            .faults
+            .set(FaultFlags::CLOCK_FALLBACK, self.clock_fallback);
+        status
+    }
+}
+
 /// The engine's fixed parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EngineParams {
-    /// This fingertip's node id.
-    pub node: NodeId,
-    /// The bus format.
-    pub format: BusFormat,
-    /// Why the board last reset (reported in every heartbeat).
-    pub reset: ResetReason,
+    /// The board.
+    pub board: BoardInfo,
     /// The CRC-32 of the image the detector was loaded from
     /// ([`crate::checksum::crc32`]): reported in the heartbeat as the configuration's
     /// checksum, and what a generated tick must have been generated for.
@@ -92,11 +123,9 @@ pub struct EngineParams {
 impl EngineParams {
     /// Context stale after 20 ms (twenty missed frames at the controller's 1 kHz), phase
     /// after 100 ms.
-    pub const fn new(node: NodeId, reset: ResetReason, image_crc: u32) -> EngineParams {
+    pub const fn new(board: BoardInfo, image_crc: u32) -> EngineParams {
         EngineParams {
-            node,
-            format: BusFormat::Fd,
-            reset,
+            board,
             image_crc,
             context_timeout_ms: 20,
             phase_timeout_ms: 100,
@@ -266,21 +295,17 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         }
         let rate_hz = (rate + 0.5) as u32;
         let phases = u8::try_from(detector.phases().len()).unwrap_or(u8::MAX);
+        let board = params.board;
         let receiver = Receiver::new(
-            params.node,
+            board.node,
             phases,
             ms_to_ticks(params.context_timeout_ms, rate_hz),
             ms_to_ticks(params.phase_timeout_ms, rate_hz),
         )
         .map_err(EngineError::Receiver)?;
-        let transmitter = Transmitter::with_defaults(params.node, params.format, rate_hz)
+        let transmitter = Transmitter::with_defaults(board.node, board.format, rate_hz)
             .map_err(EngineError::Transmitter)?;
-        let status = Status {
-            reset: params.reset,
-            tick_rate_hz: rate_hz as u16,
-            config_checksum: params.image_crc,
-            ..Status::default()
-        };
+        let status = board.status(rate_hz as u16, params.image_crc, FaultFlags(0));
         Ok(Engine {
             detector,
             state: detector.new_state(),
@@ -414,13 +439,11 @@ impl Fallback {
         Fallback {
             transmitter,
             tx: TxState::new(),
-            status: Status {
-                reset: params.reset,
-                faults: FaultFlags::CONFIG_FALLBACK,
-                tick_rate_hz: u16::try_from(rate_hz).unwrap_or(u16::MAX),
-                config_checksum: params.image_crc,
-                ..Status::default()
-            },
+            status: params.board.status(
+                u16::try_from(rate_hz).unwrap_or(u16::MAX),
+                params.image_crc,
+                FaultFlags::CONFIG_FALLBACK,
+            ),
         }
     }
 
@@ -695,15 +718,26 @@ mod tests {
 
     /// The parameters of the board's engine: the embedded image's CRC.
     fn board_params() -> EngineParams {
-        EngineParams::new(node(), ResetReason::PowerOn, crc32(boot::DETECTOR_IMAGE))
+        EngineParams::new(board(), crc32(boot::DETECTOR_IMAGE))
     }
 
     fn node() -> NodeId {
         NodeId::new(3).unwrap()
     }
 
+    /// The board of these tests: node 3 from its straps, after a power-on reset.
+    fn board() -> BoardInfo {
+        BoardInfo {
+            node: node(),
+            node_source: NodeIdSource::Straps,
+            format: BusFormat::Fd,
+            reset: ResetReason::PowerOn,
+            clock_fallback: false,
+        }
+    }
+
     fn params() -> EngineParams {
-        EngineParams::new(node(), ResetReason::PowerOn, 0xDEAD_BEEF)
+        EngineParams::new(board(), 0xDEAD_BEEF)
     }
 
     /// An analog sample: force_x, force_y, skin_accel, stress_rate.
@@ -1041,6 +1075,45 @@ mod tests {
     }
 
     #[test]
+    fn the_boards_identity_and_clock_fallback_are_in_every_heartbeat() {
+        let d = detector();
+        let fallback_clock = BoardInfo {
+            node_source: NodeIdSource::Store,
+            clock_fallback: true,
+            ..board()
+        };
+        let mut e = Engine::new(&d, d.clone(), EngineParams::new(fallback_clock, 1)).unwrap();
+        let mut pages = Vec::new();
+        for t in 0..=500 {
+            let r = e.tick(&sample(t, 0.0, 0.0), &RxShared::new(), &Health::default());
+            pages.extend(status_pages(&r.frames));
+        }
+        let health: Vec<FaultFlags> = pages
+            .iter()
+            .filter_map(|p| match p {
+                StatusPage::Health { faults, .. } => Some(*faults),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(health.len(), 3);
+        assert!(
+            health
+                .iter()
+                .all(|f| f.contains(FaultFlags::CLOCK_FALLBACK))
+        );
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity {
+                node_source: NodeIdSource::Store,
+                format: BusFormat::Fd,
+                ..
+            }
+        )));
+        let plain = engine(&d);
+        assert!(!plain.status().faults.contains(FaultFlags::CLOCK_FALLBACK));
+    }
+
+    #[test]
     fn the_confidence_stream_is_decimated_to_every_twentieth_tick() {
         let d = detector();
         let mut e = engine(&d);
@@ -1083,7 +1156,7 @@ mod tests {
     fn a_tick_generated_for_another_detector_is_refused() {
         let d = detector();
         let crc = crc32(&detector_build::compile(&config()).unwrap().image());
-        let params = EngineParams::new(node(), ResetReason::PowerOn, crc);
+        let params = EngineParams::new(board(), crc);
         let tick = ApproachTick
             .image_crc()
             .expect("a generated tick knows its image");

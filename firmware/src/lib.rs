@@ -8,6 +8,7 @@ pub mod can_timing;
 pub mod channel_set;
 pub mod checksum;
 pub mod engine;
+pub mod node_id;
 pub mod rail;
 pub mod reset;
 pub mod sampling;

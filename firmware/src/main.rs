@@ -30,12 +30,14 @@ use core::num::{NonZeroU8, NonZeroU16};
 
 use core::cell::UnsafeCell;
 use cortex_m::peripheral::DWT;
-use cortex_m_rt::entry;
+use cortex_m::peripheral::SCB;
+use cortex_m_rt::{entry, exception};
 use defmt::{error, info, warn};
 
 use embassy_executor::{Executor, InterruptExecutor, Spawner};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
+use embassy_stm32::gpio::{Input, Pull};
 use embassy_stm32::i2c::{self, I2c, Master};
 use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::mode::Async;
@@ -53,9 +55,10 @@ use {defmt_rtt as _, panic_probe as _};
 use core::cell::RefCell;
 use detector_core::Detector;
 use detector_core::Tick;
-use fingertip_can::{Receiver, ResetReason};
+use fingertip_can::{BusFormat, Receiver};
 use firmware::boot::{self, ApproachTick};
-use firmware::engine::{Service, TickRunner};
+use firmware::engine::{BoardInfo, Service, TickRunner};
+use firmware::node_id::{self, NodeIdError};
 use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
 use firmware::shared::{
     BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
@@ -178,18 +181,26 @@ const CAN_DATA_TIMING: can_timing::BitTiming =
 
 /// Clocks: 24 MHz crystal (the fingertip board and the NUCLEO-G474RE alike) / 6 × 85 =
 /// 340 MHz VCO; R / 2 = 170 MHz SYSCLK (boost mode); Q / 4 = 85 MHz for the FDCAN
-/// (85 time quanta per bit at 1 Mbit/s); the ADC runs from SYSCLK, divided to 42.5 MHz
-/// by the HAL.
-fn clocks() -> embassy_stm32::Config {
+/// (85 time quanta per bit at 1 Mbit/s, 17 at 5 Mbit/s); the ADC runs from SYSCLK,
+/// divided to 42.5 MHz by the HAL. Without the crystal (`crystal` false: it did not
+/// start), the internal 16 MHz oscillator / 4 × 85 gives the same frequencies, within its
+/// ±1 % (outside the CAN FD data phase's tolerance: the status says so).
+fn clocks(crystal: bool) -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(24_000_000),
-        mode: HseMode::Oscillator,
-    });
+    let (source, prediv) = if crystal {
+        config.rcc.hse = Some(Hse {
+            freq: Hertz(24_000_000),
+            mode: HseMode::Oscillator,
+        });
+        (PllSource::HSE, PllPreDiv::DIV6)
+    } else {
+        config.rcc.hsi = true;
+        (PllSource::HSI, PllPreDiv::DIV4)
+    };
     config.rcc.pll = Some(Pll {
-        source: PllSource::HSE,
-        prediv: PllPreDiv::DIV6,
+        source,
+        prediv,
         mul: PllMul::MUL85,
         divp: None,
         divq: Some(PllQDiv::DIV4),
@@ -227,6 +238,37 @@ struct Board {
     can_rx: CanRx<'static>,
     can_properties: Properties,
     watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
+/// The clock security system saw the crystal stop: the core fell back to the internal
+/// oscillator and the PLL stopped, so no timing holds. Start over: the boot's probe finds
+/// the crystal dead and runs from the internal oscillator (`FaultClockFallback`).
+#[exception]
+unsafe fn NonMaskableInt() {
+    regs::clear_clock_failure();
+    SCB::sys_reset();
+}
+
+/// The strap pins' levels, bit `i` strap `i` (PB4 + i), high when open: read with the
+/// pull-ups on, which are switched off again (a tied strap would draw through them).
+fn read_straps(pins: [Input<'_>; node_id::STRAPS]) -> u8 {
+    // The pull-ups charge the pins' capacitance in well under 10 µs.
+    cortex_m::asm::delay(CORE_CLOCK_HZ / 100_000);
+    pins.iter()
+        .enumerate()
+        .fold(0, |v, (i, p)| v | (u8::from(p.is_high()) << i))
+}
+
+/// No node id: the board stays off the bus (any id it picked could be another finger's)
+/// and says why, once a second, on its debug log. The watchdog is not running yet.
+fn without_node_id(e: NodeIdError) -> ! {
+    loop {
+        error!(
+            "{}: not joining the bus; strap the node id (see the wiring table)",
+            e
+        );
+        cortex_m::asm::delay(CORE_CLOCK_HZ);
+    }
 }
 
 #[entry]
@@ -276,14 +318,43 @@ fn setup() -> Board {
     // The reset reason, read before the HAL touches the RCC, and cleared so the next
     // boot reports its own.
     let reset = reset::reset_reason(regs::take_reset_flags());
-    let p = embassy_stm32::init(clocks());
+    // A dead crystal must not hang the boot before the watchdog runs: probe it with a
+    // timeout first, and fall back to the internal oscillator.
+    let crystal = regs::hse_starts();
+    let p = embassy_stm32::init(clocks(crystal));
+    if crystal {
+        regs::enable_clock_security();
+    } else {
+        warn!("the crystal did not start: running from the internal oscillator");
+    }
+    // The node id, at run time: one image serves every finger. The flash key-value
+    // store's `node_id` key goes where `None` stands (the store is not on the board yet).
+    let straps = read_straps([
+        Input::new(p.PB4, Pull::Up),
+        Input::new(p.PB5, Pull::Up),
+        Input::new(p.PB6, Pull::Up),
+        Input::new(p.PB7, Pull::Up),
+    ]);
+    let (node, node_source) = match node_id::resolve(None, straps) {
+        Ok(found) => found,
+        Err(e) => without_node_id(e),
+    };
     info!(
-        "fingertip node {=u8}, reset: {=str}, config {=str} crc32 {=u32:#010x}",
-        boot::NODE_ID.get(),
+        "fingertip node {=u8} (from its {=str}), reset: {=str}, config {=str} crc32 {=u32:#010x}, {=str}",
+        node.get(),
+        node_source.name(),
         reset.name(),
         boot::CONFIG_SOURCE,
-        boot::CONFIG_CHECKSUM
+        boot::CONFIG_CHECKSUM,
+        boot::BUS_FORMAT.name()
     );
+    let board = BoardInfo {
+        node,
+        node_source,
+        format: boot::BUS_FORMAT,
+        reset,
+        clock_fallback: !crystal,
+    };
 
     regs::freeze_watchdog_when_halted();
 
@@ -296,7 +367,7 @@ fn setup() -> Board {
 
     // The detector before anything else is built on the stack: loading the image is the
     // deepest stack of the firmware.
-    let service = build_detector(reset);
+    let service = build_detector(board);
     let rate_hz = service.rate_hz();
     match service.fallback_reason() {
         None => info!("detector in service"),
@@ -353,20 +424,24 @@ fn setup() -> Board {
     );
     let sensor = Tmp117::new(i2c, Delay, tmp117::DEFAULT_ADDRESS, I2C_TIMEOUT_MS);
 
-    // FDCAN1, CAN FD at 1 Mbit/s arbitration and 5 Mbit/s data. Only this node's receive
-    // identifiers are accepted, in hardware; bus-off recovery is the supervisor's (with
-    // back-off), not the HAL's immediate one.
+    // FDCAN1, CAN FD at 1 Mbit/s arbitration and 5 Mbit/s data (or classic CAN at
+    // 1 Mbit/s). Only this node's receive identifiers are accepted, in hardware; bus-off
+    // recovery is the supervisor's (with back-off), not the HAL's immediate one.
     let mut can = CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs);
     let field = |v: u8| NonZeroU8::new(v).unwrap_or(NonZeroU8::MIN);
     let prescaler = |v: u16| NonZeroU16::new(v).unwrap_or(NonZeroU16::MIN);
-    can.set_config(
-        can.config()
-            .set_nominal_bit_timing(can::config::NominalBitTiming {
-                prescaler: prescaler(CAN_TIMING.prescaler),
-                seg1: field(CAN_TIMING.seg1),
-                seg2: field(CAN_TIMING.seg2),
-                sync_jump_width: field(CAN_TIMING.sjw),
-            })
+    let config = can
+        .config()
+        .set_nominal_bit_timing(can::config::NominalBitTiming {
+            prescaler: prescaler(CAN_TIMING.prescaler),
+            seg1: field(CAN_TIMING.seg1),
+            seg2: field(CAN_TIMING.seg2),
+            sync_jump_width: field(CAN_TIMING.sjw),
+        })
+        .set_automatic_bus_off_recovery(false)
+        .set_global_filter(can::config::GlobalFilter::reject_all());
+    can.set_config(match boot::BUS_FORMAT {
+        BusFormat::Fd => config
             .set_data_bit_timing(can::config::DataBitTiming {
                 transceiver_delay_compensation: true,
                 prescaler: prescaler(CAN_DATA_TIMING.prescaler),
@@ -374,10 +449,11 @@ fn setup() -> Board {
                 seg2: field(CAN_DATA_TIMING.seg2),
                 sync_jump_width: field(CAN_DATA_TIMING.sjw),
             })
-            .set_frame_transmit(can::config::FrameTransmissionConfig::AllowFdCanAndBRS)
-            .set_automatic_bus_off_recovery(false)
-            .set_global_filter(can::config::GlobalFilter::reject_all()),
-    );
+            .set_frame_transmit(can::config::FrameTransmissionConfig::AllowFdCanAndBRS),
+        BusFormat::Classic => {
+            config.set_frame_transmit(can::config::FrameTransmissionConfig::ClassicCanOnly)
+        }
+    });
     info!(
         "CAN FD {=u32}/{=u32} bit/s: {=u32}/{=u32} quanta per bit, sample points {=u32}/{=u32} per mille",
         CAN_BITRATE,
@@ -407,7 +483,23 @@ fn setup() -> Board {
             },
         );
     }
-    let (can_tx_half, can_rx_half, properties) = can.into_normal_mode().split();
+    let can = can.into_normal_mode();
+    // The HAL never enables transceiver delay compensation (writing the data bit timing
+    // clears it); the 200 ns data bit at 5 Mbit/s is shorter than the transceiver's loop
+    // delay, so the FDCAN must sample its own bits at a secondary point: set by register,
+    // now that the controller is configured.
+    if boot::BUS_FORMAT == BusFormat::Fd {
+        let offset = CAN_DATA_TIMING.tdc_offset();
+        if regs::enable_tdc(offset) {
+            info!(
+                "transceiver delay compensation on, offset {=u8} clocks",
+                offset
+            );
+        } else {
+            error!("transceiver delay compensation did not take: the data phase will err");
+        }
+    }
+    let (can_tx_half, can_rx_half, properties) = can.split();
     // The transmit buffers are the transmit path's (`regs::FdcanTx`); the HAL's transmit
     // half stays unused but alive: dropping both halves switches the peripheral off.
     core::mem::forget(can_tx_half);
@@ -436,9 +528,9 @@ fn setup() -> Board {
 /// checked). In a static, not moved into the task: an async task's arguments are stored
 /// in its future twice (as arguments and as locals), and the engine is 3 KiB.
 #[inline(never)]
-fn build_detector(reset: ResetReason) -> &'static mut Service<'static, ApproachTick> {
+fn build_detector(board: BoardInfo) -> &'static mut Service<'static, ApproachTick> {
     let detector = DETECTOR.take();
-    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, reset))
+    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, board))
 }
 
 /// The reading of the scans: the ADC and its trigger (kept alive for the DMA), the front

@@ -1,8 +1,9 @@
 //! The board binary's raw register accesses, the few the HAL does not offer, in one
-//! place: the reset flags, the watchdog's debug freeze, the sample timer's trigger
-//! output, and the FDCAN's error state, last error code, bus-off recovery and transmit
-//! buffers (the HAL's transmit path neither keeps a buffer for events nor hands back the
-//! CAN FD frames it cancels).
+//! place: the reset flags, the crystal's probe and clock security, the watchdog's debug
+//! freeze, the sample timer's trigger output, the ADC DMA's position, and the FDCAN's
+//! transceiver delay compensation, error state, last error code, bus-off recovery and
+//! transmit buffers (the HAL's transmit path neither keeps a buffer for events nor hands
+//! back the CAN FD frames it cancels).
 
 use embassy_stm32::pac;
 use embassy_stm32::peripherals::TIM6;
@@ -21,6 +22,33 @@ pub fn take_reset_flags() -> u32 {
 /// The ADC's DMA channel (DMA1 channel 1): transfers left before it wraps (CNDTR).
 pub fn adc_dma_remaining() -> u16 {
     pac::DMA1.ch(0).ndtr().read().ndt()
+}
+
+/// Starts the crystal oscillator and waits up to 10 ms for it (a crystal starts in 2 ms at
+/// most); `false`, with the oscillator off again, if it does not. Run on the internal
+/// oscillator at reset (16 MHz), before the HAL's clock set-up, which would wait forever.
+pub fn hse_starts() -> bool {
+    pac::RCC.cr().modify(|w| w.set_hseon(true));
+    for _ in 0..100 {
+        if pac::RCC.cr().read().hserdy() {
+            return true;
+        }
+        // 100 µs at 16 MHz.
+        cortex_m::asm::delay(1_600);
+    }
+    pac::RCC.cr().modify(|w| w.set_hseon(false));
+    false
+}
+
+/// Watches the crystal from now on (the clock security system): if it stops, the
+/// non-maskable interrupt fires.
+pub fn enable_clock_security() {
+    pac::RCC.cr().modify(|w| w.set_csson(true));
+}
+
+/// Acknowledges a clock failure.
+pub fn clear_clock_failure() {
+    pac::RCC.cicr().write(|w| w.set_cssc(true));
 }
 
 /// Keeps the independent watchdog from firing while a debugger holds the core.
@@ -132,4 +160,25 @@ pub fn clear_cancel_interrupt() {
     if pac::FDCAN1.ir().read().tcf() {
         pac::FDCAN1.ir().write(|w| w.set_tcf(true));
     }
+}
+
+/// Enables the transceiver delay compensation of FDCAN1's data phase with the secondary
+/// sample point `offset` kernel clocks after the measured delay (TDCR.TDCO, filter off):
+/// back to initialization with configuration change enabled (DBTP and TDCR are protected),
+/// set, and out again. Returns whether the registers read back as set.
+pub fn enable_tdc(offset: u8) -> bool {
+    let r = pac::FDCAN1;
+    r.cccr().modify(|w| w.set_init(true));
+    while !r.cccr().read().init() {}
+    r.cccr().modify(|w| w.set_cce(true));
+    r.tdcr().write(|w| {
+        w.set_tdco(offset);
+        w.set_tdcf(0);
+    });
+    r.dbtp().modify(|w| w.set_tdc(true));
+    let set = r.dbtp().read().tdc() && r.tdcr().read().tdco() == offset;
+    r.cccr().modify(|w| w.set_cce(false));
+    r.cccr().modify(|w| w.set_init(false));
+    while r.cccr().read().init() {}
+    set
 }
