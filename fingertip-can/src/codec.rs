@@ -442,10 +442,10 @@ pub struct ContextSlot {
     pub pos_err: [i16; 2],
 }
 
-/// Bits of one context slot (six fields and 4 reserved bits).
-const SLOT_BITS: u32 = 88;
-/// First bit of slot 0 in a [`ContextMsg`].
-const SLOTS_START: u32 = 64;
+/// Bytes of one context slot (six fields and 4 reserved bits: 88 bits).
+const SLOT_BYTES: usize = 11;
+/// First byte of slot 0 in a [`ContextMsg`] (bit 64).
+const SLOTS_START: usize = 8;
 
 impl ContextSlot {
     /// Metres per second per raw unit of velocity.
@@ -498,21 +498,34 @@ impl ContextSlot {
         Ok(())
     }
 
-    fn write(&self, p: &mut Payload, start: u32) {
+    /// Writes the slot at byte `first` (slots start on a byte): the six fields packed in one
+    /// 88-bit word, stored at once.
+    fn write(&self, p: &mut Payload, first: usize) {
+        let mut w = 0u128;
         for part in ContextPart::ALL {
             let (offset, len) = part.slot_field();
             for (k, v) in (0u32..).zip(self.part(part)) {
-                p.put(start + offset + k * len, len, v as u16 as u32);
+                w |= (u128::from(v as u16) & ((1 << len) - 1)) << (offset + k * len);
             }
+        }
+        if let Some(dst) = p.bytes.get_mut(first..first + SLOT_BYTES) {
+            dst.copy_from_slice(&w.to_le_bytes()[..SLOT_BYTES]);
         }
     }
 
-    fn read(d: &[u8], start: u32) -> ContextSlot {
+    /// Reads the slot at byte `first`: one 88-bit load, six fields shifted out.
+    fn read(d: &[u8], first: usize) -> ContextSlot {
+        let mut b = [0u8; 16];
+        if let Some(src) = d.get(first..first + SLOT_BYTES) {
+            b[..SLOT_BYTES].copy_from_slice(src);
+        }
+        let w = u128::from_le_bytes(b);
         let field = |part: ContextPart, k: u32| {
             let (offset, len) = part.slot_field();
-            sget(d, start + offset + k * len, len) as i16
+            let shift = 32 - len;
+            (((w >> (offset + k * len)) as u32) << shift) as i32 >> shift
         };
-        let pair = |part| [field(part, 0), field(part, 1)];
+        let pair = |part| [field(part, 0) as i16, field(part, 1) as i16];
         ContextSlot {
             vel_des: pair(ContextPart::Velocity),
             acc_des: pair(ContextPart::Acceleration),
@@ -564,7 +577,7 @@ impl ContextMsg {
             if let Some(s) = slot {
                 s.validate(MessageKind::Context)?;
                 p.put(24 + k, 1, 1);
-                s.write(&mut p, SLOTS_START + k * SLOT_BITS);
+                s.write(&mut p, SLOTS_START + k as usize * SLOT_BYTES);
             }
         }
         p.put(32, 32, self.time_us);
@@ -580,7 +593,7 @@ impl ContextMsg {
         };
         for (k, slot) in (0u32..).zip(m.slots.iter_mut()) {
             if get(d, 24 + k, 1) == 1 {
-                let s = ContextSlot::read(d, SLOTS_START + k * SLOT_BITS);
+                let s = ContextSlot::read(d, SLOTS_START + k as usize * SLOT_BYTES);
                 s.validate(MessageKind::Context)?;
                 *slot = Some(s);
             }

@@ -55,8 +55,8 @@ pub use codec::{
 };
 pub use e2e::Counter;
 pub use rx::{
-    Accepted, ControllerInputs, Freshness, REJECT_REASONS, Receiver, RejectCounts, RejectReason,
-    RxConfigError, RxCounts, RxLink, RxState,
+    Accepted, ControllerInputs, Decoded, Freshness, REJECT_REASONS, Receiver, RejectCounts,
+    RejectReason, RxConfigError, RxCounts, RxLink, RxState,
 };
 pub use tx::{
     DEFAULT_HEARTBEAT_MS, DEFAULT_STREAM_DECIMATION, MAX_TX_FRAMES, Status, Transmitter,

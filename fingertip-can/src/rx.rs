@@ -361,6 +361,12 @@ pub enum Accepted {
     ContextPart(ContextPartMsg),
 }
 
+/// A received frame that passed [`Receiver::decode`]'s checks, waiting for
+/// [`Receiver::accept`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Decoded(Accepted);
+
 /// Which of the controller's messages are fresh (accepted within their timeout).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -459,6 +465,7 @@ impl Receiver {
 
     /// Handles one received frame at tick `now`: accepts it (updating the state) or
     /// rejects it with a reason (counting it, changing nothing else). Never panics.
+    /// [`decode`](Receiver::decode) then [`accept`](Receiver::accept).
     pub fn receive(
         &self,
         state: &mut RxState,
@@ -466,7 +473,51 @@ impl Receiver {
         id: Id,
         data: &[u8],
     ) -> Result<Accepted, RejectReason> {
-        match self.check(&state.link, now, id, data) {
+        self.accept(state, now, self.decode(id, data))
+    }
+
+    /// The checks of a received frame that need no state: the identifier, the length, the
+    /// CRC, every value's range, the phase configured. Pure: the firmware runs it before
+    /// taking the lock on the state, where only [`accept`](Receiver::accept)'s few checks
+    /// run.
+    pub fn decode(&self, id: Id, data: &[u8]) -> Result<Decoded, RejectReason> {
+        let group = ContextGroup::of(self.node);
+        match MessageKind::from_id(id) {
+            Some((MessageKind::Phase | MessageKind::ContextPart, Address::Node(n)))
+                if n == self.node => {}
+            Some((MessageKind::Context, Address::Group(g))) if g == group => {}
+            _ => return Err(RejectReason::UnknownId),
+        }
+        let (_, message) = Message::decode(id, data).map_err(|e| RejectReason::from_decode(&e))?;
+        Ok(Decoded(match message {
+            Message::Phase(m) if m.phase >= self.phase_count => {
+                return Err(RejectReason::PhaseNotConfigured);
+            }
+            Message::Phase(command) => Accepted::Phase {
+                command,
+                changed: true,
+            },
+            Message::Context(m) => Accepted::Context {
+                counter: m.counter,
+                slot: m.slot_of(group, self.node),
+                time_us: m.time_us,
+            },
+            Message::ContextPart(m) => Accepted::ContextPart(m),
+            // Unreachable: the identifier was checked above.
+            _ => return Err(RejectReason::UnknownId),
+        }))
+    }
+
+    /// Takes a frame [`decode`](Receiver::decode) passed (or the reason it did not) into
+    /// the state at tick `now`: the counter rule, then the new values; a rejection is
+    /// counted and changes nothing else.
+    pub fn accept(
+        &self,
+        state: &mut RxState,
+        now: Tick,
+        decoded: Result<Decoded, RejectReason>,
+    ) -> Result<Accepted, RejectReason> {
+        match decoded.and_then(|d| self.sequence(&state.link, now, d.0)) {
             Ok((accepted, lost)) => {
                 state.counts.lost_frames = state.counts.lost_frames.saturating_add(lost);
                 self.apply(&mut state.link, now, &accepted);
@@ -509,66 +560,39 @@ impl Receiver {
         }
     }
 
-    /// Validation without side effects: the accepted frame and the frames lost before it.
-    fn check(
+    /// The counter rule for a decoded frame: the frame (a phase command's change worked
+    /// out) and the frames lost before it.
+    fn sequence(
         &self,
         link: &RxLink,
         now: Tick,
-        id: Id,
-        data: &[u8],
+        frame: Accepted,
     ) -> Result<(Accepted, u32), RejectReason> {
-        let group = ContextGroup::of(self.node);
-        match MessageKind::from_id(id) {
-            Some((MessageKind::Phase | MessageKind::ContextPart, Address::Node(n)))
-                if n == self.node => {}
-            Some((MessageKind::Context, Address::Group(g))) if g == group => {}
-            _ => return Err(RejectReason::UnknownId),
-        }
-        let (_, message) = Message::decode(id, data).map_err(|e| RejectReason::from_decode(&e))?;
-        match message {
-            Message::Phase(m) => {
-                if m.phase >= self.phase_count {
-                    return Err(RejectReason::PhaseNotConfigured);
-                }
-                let lost = link
-                    .phase_track
-                    .check(now, self.phase_timeout, m.counter, None)?;
+        match frame {
+            Accepted::Phase { command, .. } => {
+                let lost =
+                    link.phase_track
+                        .check(now, self.phase_timeout, command.counter, None)?;
                 let changed = link
                     .phase
                     .get()
-                    .is_none_or(|p| (p.phase, p.sequence) != (m.phase, m.sequence));
-                Ok((
-                    Accepted::Phase {
-                        command: m,
-                        changed,
-                    },
-                    lost,
-                ))
+                    .is_none_or(|p| (p.phase, p.sequence) != (command.phase, command.sequence));
+                Ok((Accepted::Phase { command, changed }, lost))
             }
-            Message::Context(m) => {
-                let lost = link.context_track.check(
-                    now,
-                    self.context_timeout,
-                    m.counter,
-                    Some(m.time_us),
-                )?;
-                Ok((
-                    Accepted::Context {
-                        counter: m.counter,
-                        slot: m.slot_of(group, self.node),
-                        time_us: m.time_us,
-                    },
-                    lost,
-                ))
+            Accepted::Context {
+                counter, time_us, ..
+            } => {
+                let lost =
+                    link.context_track
+                        .check(now, self.context_timeout, counter, Some(time_us))?;
+                Ok((frame, lost))
             }
-            Message::ContextPart(m) => {
+            Accepted::ContextPart(m) => {
                 let lost = link
                     .part_track
                     .check(now, self.context_timeout, m.counter, None)?;
-                Ok((Accepted::ContextPart(m), lost))
+                Ok((frame, lost))
             }
-            // Unreachable: the identifier was checked above.
-            _ => Err(RejectReason::UnknownId),
         }
     }
 

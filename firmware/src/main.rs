@@ -649,11 +649,14 @@ async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHan
     loop {
         match rx.read_fd().await {
             Ok(envelope) => {
-                let now = shared.now();
                 let frame = &envelope.frame;
+                // The decoding and the CRC outside the lock, which the detector shares:
+                // under it, only the counter rule and the new values.
+                let decoded = receiver.decode(*frame.id(), frame.data());
+                let now = shared.now();
                 let result = shared
                     .rx()
-                    .with(|state| receiver.receive(state, now, *frame.id(), frame.data()));
+                    .with(|state| receiver.accept(state, now, decoded));
                 shared.frame_received();
                 if let Err(reason) = result {
                     defmt::debug!("frame rejected: {=str}", reason.name());
