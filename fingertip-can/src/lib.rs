@@ -59,8 +59,8 @@ pub use rx::{
     RejectReason, RxConfigError, RxCounts, RxLink, RxState,
 };
 pub use tx::{
-    DEFAULT_HEARTBEAT_MS, DEFAULT_STREAM_DECIMATION, MAX_TX_FRAMES, Status, Transmitter,
-    TxConfigError, TxFrames, TxState,
+    DEFAULT_CLASSIC_STREAM_DECIMATION, DEFAULT_HEARTBEAT_MS, DEFAULT_STREAM_DECIMATION,
+    MAX_TX_FRAMES, Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 pub use embedded_can::{ExtendedId, Id, StandardId};
@@ -204,6 +204,16 @@ impl BusFormat {
         match self {
             BusFormat::Fd => "CAN FD",
             BusFormat::Classic => "classic CAN",
+        }
+    }
+
+    /// Ticks per confidence-stream sample by default on this format:
+    /// [`DEFAULT_STREAM_DECIMATION`] on CAN FD, [`DEFAULT_CLASSIC_STREAM_DECIMATION`] on
+    /// classic CAN (which cannot carry the faster stream next to a hand's context).
+    pub const fn default_stream_decimation(self) -> u16 {
+        match self {
+            BusFormat::Fd => DEFAULT_STREAM_DECIMATION,
+            BusFormat::Classic => DEFAULT_CLASSIC_STREAM_DECIMATION,
         }
     }
 }

@@ -25,9 +25,14 @@ use super::rx::{Receiver, RejectReason, RxCounts, RxState};
 use super::{BusFormat, CanFrame, Counter, NodeId};
 use detector_core::{EventId, Level, MAX_EVENTS, Output, Tick};
 
-/// Default ticks per confidence-stream sample: 20, i.e. 250 samples/s at the default
-/// 5 kHz (see `docs/can-protocol.md` for the bus load).
+/// Default ticks per confidence-stream sample on CAN FD: 20, i.e. 250 samples/s at the
+/// default 5 kHz (see `docs/can-protocol.md` for the bus load).
 pub const DEFAULT_STREAM_DECIMATION: u16 = 20;
+
+/// Default ticks per confidence-stream sample on classic CAN: 100, i.e. 50 samples/s at
+/// 5 kHz. At 250 samples/s five fingertips' stream pages alone would take half of a
+/// 1 Mbit/s classic bus; at 50 samples/s the controller's context fits at up to 253 Hz.
+pub const DEFAULT_CLASSIC_STREAM_DECIMATION: u16 = 100;
 
 /// Default heartbeat period in milliseconds (two status frames per period).
 pub const DEFAULT_HEARTBEAT_MS: u32 = 50;
@@ -249,8 +254,8 @@ impl Transmitter {
         })
     }
 
-    /// The defaults for a detector running at `rate_hz`:
-    /// [`DEFAULT_STREAM_DECIMATION`] and a [`DEFAULT_HEARTBEAT_MS`] heartbeat.
+    /// The defaults for a detector running at `rate_hz`: the format's stream decimation
+    /// ([`BusFormat::default_stream_decimation`]) and a [`DEFAULT_HEARTBEAT_MS`] heartbeat.
     pub const fn with_defaults(
         node: NodeId,
         format: BusFormat,
@@ -260,7 +265,7 @@ impl Transmitter {
             return Err(TxConfigError::Rate(rate_hz));
         }
         let hb = (rate_hz * DEFAULT_HEARTBEAT_MS).div_ceil(1000);
-        Transmitter::new(node, format, DEFAULT_STREAM_DECIMATION, hb)
+        Transmitter::new(node, format, format.default_stream_decimation(), hb)
     }
 
     /// The same transmitter for node `node`.
@@ -637,6 +642,9 @@ mod tests {
         let t = Transmitter::with_defaults(n, BusFormat::Fd, 5000).unwrap();
         assert_eq!(t.stream_decimation(), 20);
         assert_eq!(t.heartbeat_period(), 250);
+        let c = Transmitter::with_defaults(n, BusFormat::Classic, 5000).unwrap();
+        assert_eq!(c.stream_decimation(), 100);
+        assert_eq!(c.heartbeat_period(), 250);
         assert_eq!(
             Transmitter::new(n, BusFormat::Fd, 0, 1),
             Err(TxConfigError::StreamDecimation(0))

@@ -135,7 +135,7 @@ enum Command {
         /// Fingertips on the bus (1..=15).
         #[arg(long, default_value_t = 1)]
         fingertips: u32,
-        /// Ticks per confidence-stream sample.
+        /// Ticks per confidence-stream sample (default 20 on CAN FD, 100 with --classic).
         #[arg(long)]
         decimation: Option<u32>,
         /// Control cycles per second: the controller's context to each fingertip.
@@ -366,6 +366,7 @@ fn run(cli: Cli) -> Result<()> {
             let mut cfg = BusConfig::with_fingertips(fingertips);
             if classic {
                 cfg.format = BusFormat::Classic;
+                cfg.stream_decimation = u32::from(cfg.format.default_stream_decimation());
             }
             if let Some(d) = decimation {
                 cfg.stream_decimation = d;

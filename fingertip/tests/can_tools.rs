@@ -112,9 +112,11 @@ fn frames_survive_a_trip_through_a_log() {
             assert!((r.time.unwrap() - t.as_secs_f64()).abs() < 1e-6);
         }
         assert_eq!(log.events().count(), 2);
-        // 1000 ticks at one sample per 20: 50 samples per fingertip, three events each.
+        // 1000 ticks at one sample per 20 (CAN FD: 50 samples per fingertip) or per 100
+        // (classic: 10), three events each.
+        let samples = 1000 / usize::from(format.default_stream_decimation());
         let values: usize = records.iter().map(|r| r.stream_values().len()).sum();
-        assert_eq!(values, 2 * 50 * 3, "{}", format.name());
+        assert_eq!(values, 2 * samples * 3, "{}", format.name());
     }
 }
 
@@ -364,8 +366,8 @@ fn a_lost_stream_sample_is_a_counter_gap() {
             ..
         }
     ));
-    // Classic: every page of node 2's fourth sample is lost.
-    let frames = fingertip_traffic(BusFormat::Classic, 200);
+    // Classic (a sample every 100 ticks): every page of node 2's fourth sample is lost.
+    let frames = fingertip_traffic(BusFormat::Classic, 1000);
     let problems = problems_losing(frames, MessageKind::StreamPage.raw_id(node(2)), 10..13);
     assert!(
         matches!(

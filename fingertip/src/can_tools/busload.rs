@@ -578,12 +578,18 @@ pub fn classic_summary(cfg: &BusConfig, r: &BusReport) -> String {
             .max((cfg.tick_rate_hz / CLASSIC_STREAM_HZ).round() as u32),
         ..cfg.clone()
     };
-    let slow_hz = analyse(&slow).map_or(0.0, |s| s.max_context_hz(&slow, 0.7));
-    format!(
-        "{} would need {:.1}% for this traffic; for 70% total it carries context at up to {:.0} Hz per fingertip, {:.0} Hz with the stream at {:.0} samples/s (--decimation {})",
+    let head = format!(
+        "{} would need {:.1}% for this traffic; for 70% total it carries context at up to {:.0} Hz per fingertip",
         rates(cfg),
         100.0 * r.total_load,
         r.max_context_hz(cfg, 0.7),
+    );
+    if slow.stream_decimation == cfg.stream_decimation {
+        return head;
+    }
+    let slow_hz = analyse(&slow).map_or(0.0, |s| s.max_context_hz(&slow, 0.7));
+    format!(
+        "{head}, {:.0} Hz with the stream at {:.0} samples/s (--decimation {})",
         slow_hz,
         slow.tick_rate_hz / f64::from(slow.stream_decimation),
         slow.stream_decimation

@@ -512,8 +512,8 @@ fn stream_page(node: NodeId) -> MessageDef {
     MessageDef {
         kind: MessageKind::StreamPage,
         address: Address::Node(node),
-        comment: "Confidence stream, classic CAN: one page per event of the current phase per sample",
-        cycle_ms: Some(4),
+        comment: "Confidence stream, classic CAN: one page per event of the current phase per sample (every 100 ticks = 20 ms by default)",
+        cycle_ms: Some(20),
         signals: s,
     }
 }
