@@ -8,8 +8,8 @@
 //!   the unit struct `ApproachTick`), which the firmware runs; the configuration is then
 //!   checked against the channels the board can feed and the sample timer's clock;
 //! - `build_consts.rs`: the detector image's CRC-32 (reported in the status heartbeat),
-//!   its source path, the sample timer's period for its rate, and the CAN node id from
-//!   `FINGERTIP_NODE_ID` (0..=15, default 0);
+//!   its source path and the sample timer's period for its rate (the CAN node id is found
+//!   at boot, not built in);
 //! - for the chip only: `memory.x` on the linker path and the link arguments of the
 //!   board binary (`-Tlink.x`, `-Tdefmt.x`, `--nmagic`), for the binary alone so that no
 //!   other crate built for the target is made to link defmt.
@@ -40,7 +40,6 @@ fn main() -> Result<()> {
     let out = PathBuf::from(env::var("OUT_DIR")?);
 
     println!("cargo:rerun-if-env-changed=FINGERTIP_CONFIG");
-    println!("cargo:rerun-if-env-changed=FINGERTIP_NODE_ID");
     println!("cargo:rerun-if-changed=src/wiring.rs");
     println!("cargo:rerun-if-changed=src/trigger.rs");
 
@@ -68,16 +67,6 @@ fn main() -> Result<()> {
         )
     })?;
 
-    let node = match env::var("FINGERTIP_NODE_ID") {
-        Ok(s) => s
-            .trim()
-            .parse::<u8>()
-            .ok()
-            .filter(|n| *n <= 15)
-            .ok_or_else(|| format!("FINGERTIP_NODE_ID = {s:?} is not a node id in 0..=15"))?,
-        Err(_) => 0,
-    };
-
     let mut consts = String::new();
     writeln!(
         consts,
@@ -93,11 +82,6 @@ fn main() -> Result<()> {
         "/// The configuration file the firmware was built with, from the workspace root."
     )?;
     writeln!(consts, "pub const CONFIG_SOURCE: &str = {config_rel:?};")?;
-    writeln!(
-        consts,
-        "/// The CAN node id the firmware was built for (`FINGERTIP_NODE_ID`, 0..=15)."
-    )?;
-    writeln!(consts, "pub const NODE_ID: u8 = {node};")?;
     writeln!(
         consts,
         "/// Sample-timer clocks per detector tick, for the configuration's rate."

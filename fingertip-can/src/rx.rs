@@ -1,28 +1,43 @@
-//! The fingertip's receive side: validates the controller's phase, context and tip state
-//! frames, rejects bad ones with a reason (counted for the status frame), and keeps the
-//! latest good values with their age so stale context is never used.
+//! The fingertip's receive side: validates the controller's phase and context frames,
+//! rejects bad ones with a reason (counted for the status frame), counts the frames lost,
+//! and keeps the latest good values with their age so stale context is never used.
 //!
 //! Parameters live in [`Receiver`], everything that changes in [`RxState`]. A rejected
 //! frame changes nothing but the count of its reason.
 //!
-//! # Counter rule
-//! A protected frame's counter must be 1..=`max_counter_delta` ahead of the last accepted
-//! frame of the same message (the gap, minus one, is counted as lost frames); 0 ahead is a
-//! repetition and anything further is out of order or a replay: both are rejected as
-//! [`RejectReason::Sequence`]. When the message is stale (nothing accepted within its
-//! timeout, or nothing yet) any counter is accepted: the receiver resynchronizes.
+//! # Counter rule (AUTOSAR E2E profile 5 style)
+//! Each identifier the fingertip listens to (its phase, its group's broadcast context, its
+//! classic context parts) has its own counter track. A frame with a good CRC is checked
+//! against the last frame accepted on its identifier:
+//!
+//! - the counter did not move (0 ahead): a repetition, rejected ([`RejectReason::Sequence`]);
+//! - while the track is fresh (its last frame accepted within the message's timeout), a
+//!   context frame whose controller time does not advance is an old frame, rejected
+//!   ([`RejectReason::Sequence`]);
+//! - anything else is accepted at once, resynchronizing the counter: a frame `k + 1`
+//!   ahead counts `k` frames lost. No good frame is ever rejected because frames before it
+//!   were lost.
+//!
+//! After a silence longer than the timeout, a context frame whose time went back (the
+//! controller restarted) is accepted without counting any loss. The 8-bit counter wraps
+//! after 256 frames (256 ms at 1 kHz), far beyond any timeout, so a gap of up to 255
+//! frames is counted exactly.
 //!
 //! # Stale rule
-//! Context and tip state are stale when none was accepted within the context timeout; the
-//! phase, within the phase timeout. [`Receiver::inputs`] then withholds the values, and
-//! the caller marks the channels they feed as faulty, so the detector judges no event
-//! that depends on them. [`Receiver::poll`], called once per tick, latches staleness and
-//! counts stale episodes.
+//! The fingertip's velocity, acceleration and position error (its slot of the broadcast
+//! context, or the three classic parts) are stale when none was accepted within the
+//! context timeout; the phase, within the phase timeout. A context frame whose slot for
+//! this fingertip is not filled is accepted (its counter tracked) but refreshes nothing.
+//! [`Receiver::inputs`] withholds stale values, and the caller marks the channels they
+//! feed as faulty, so the detector judges no event that depends on them.
+//! [`Receiver::poll`], called once per tick, latches staleness (so a tick counter that
+//! wraps during a very long silence cannot make old context look fresh) and counts stale
+//! episodes.
 
 use core::fmt;
 
-use super::codec::{ContextMsg, DecodeError, Message, PhaseMsg, TipStateMsg};
-use super::{Id, MessageKind, NodeId};
+use super::codec::{ContextPart, ContextPartMsg, ContextSlot, DecodeError, Message, PhaseMsg};
+use super::{Address, ContextGroup, Counter, Id, MessageKind, NodeId};
 use detector_core::{MAX_PHASES, Signal, Tick};
 
 /// Why a received frame was rejected.
@@ -31,12 +46,13 @@ use detector_core::{MAX_PHASES, Signal, Tick};
 pub enum RejectReason {
     /// Not the length of its message (including remote frames, passed with no data).
     WrongLength,
-    /// Not one of this node's three receive identifiers (phase, context, tip state).
+    /// Not one of this node's receive identifiers (its phase, its group's context, its
+    /// context parts).
     UnknownId,
-    /// The CRC-8 does not match (corrupted, or sent under another identifier).
+    /// The CRC-16 does not match (corrupted, or sent under another identifier).
     BadCrc,
-    /// The counter did not advance by 1..=`max_counter_delta`: a repeated, out-of-order or
-    /// replayed frame.
+    /// A repetition (the counter did not move), or an old context frame (its controller
+    /// time did not advance).
     Sequence,
     /// A phase index at or above the number of phases configured.
     PhaseNotConfigured,
@@ -69,7 +85,7 @@ impl RejectReason {
             RejectReason::WrongLength => "wrong length",
             RejectReason::UnknownId => "unknown identifier",
             RejectReason::BadCrc => "bad CRC",
-            RejectReason::Sequence => "counter not advancing",
+            RejectReason::Sequence => "repeated or old frame",
             RejectReason::PhaseNotConfigured => "phase not configured",
             RejectReason::OutOfRange => "value out of range",
         }
@@ -146,62 +162,152 @@ impl RxCounts {
     }
 }
 
+/// The last frame accepted on one identifier.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-struct Slot<T> {
-    /// The last accepted message and the tick it arrived.
-    last: Option<(T, Tick)>,
-    /// Latched by `poll` once stale, cleared by the next accepted frame; guards against
-    /// the tick counter wrapping during a very long silence.
+struct Last {
+    counter: Counter,
+    /// The controller's time, for the frames that carry it.
+    time: Option<u32>,
+    /// When it arrived.
+    at: Tick,
+}
+
+/// A counter track: the last frame accepted on one identifier, and whether it has aged
+/// past its timeout (latched by `poll`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Track {
+    last: Option<Last>,
     stale: bool,
 }
 
-impl<T> Default for Slot<T> {
+impl Default for Track {
     fn default() -> Self {
-        Slot {
+        Track {
             last: None,
             stale: true,
         }
     }
 }
 
-impl<T: Copy> Slot<T> {
-    fn is_stale(&self, now: Tick, timeout: Tick) -> bool {
-        match self.last {
-            None => true,
-            Some((_, at)) => self.stale || now.wrapping_sub(at) > timeout,
+impl Track {
+    fn is_fresh(&self, now: Tick, timeout: Tick) -> bool {
+        !self.stale && self.last.is_some_and(|l| now.wrapping_sub(l.at) <= timeout)
+    }
+
+    fn latch(&mut self, now: Tick, timeout: Tick) {
+        self.stale = !self.is_fresh(now, timeout);
+    }
+
+    /// The counter rule: frames lost before this one, or a rejection.
+    fn check(
+        &self,
+        now: Tick,
+        timeout: Tick,
+        counter: Counter,
+        time: Option<u32>,
+    ) -> Result<u32, RejectReason> {
+        let Some(last) = self.last else {
+            return Ok(0);
+        };
+        let delta = last.counter.delta_to(counter);
+        if delta == 0 {
+            return Err(RejectReason::Sequence);
+        }
+        let advanced = match (time, last.time) {
+            (Some(t), Some(lt)) => t.wrapping_sub(lt) as i32 > 0,
+            _ => true,
+        };
+        match (self.is_fresh(now, timeout), advanced) {
+            (true, false) => Err(RejectReason::Sequence),
+            // A controller that restarted: nothing to count.
+            (false, false) => Ok(0),
+            (_, true) => Ok(u32::from(delta - 1)),
         }
     }
 
-    fn value(&self) -> Option<T> {
-        self.last.map(|(m, _)| m)
+    fn accept(&mut self, now: Tick, counter: Counter, time: Option<u32>) {
+        *self = Track {
+            last: Some(Last {
+                counter,
+                time,
+                at: now,
+            }),
+            stale: false,
+        };
     }
 }
 
-/// What the receiver knows of the controller: the last accepted frame of each message
-/// and when it arrived. Changed only by accepted frames and by [`Receiver::poll`].
+/// A value and when it arrived, with the staleness latched by `poll`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+struct Held<T> {
+    value: Option<(T, Tick)>,
+    stale: bool,
+}
+
+impl<T> Default for Held<T> {
+    fn default() -> Self {
+        Held {
+            value: None,
+            stale: true,
+        }
+    }
+}
+
+impl<T: Copy> Held<T> {
+    fn is_fresh(&self, now: Tick, timeout: Tick) -> bool {
+        !self.stale
+            && self
+                .value
+                .is_some_and(|(_, at)| now.wrapping_sub(at) <= timeout)
+    }
+
+    fn get(&self) -> Option<T> {
+        self.value.map(|(v, _)| v)
+    }
+
+    fn set(&mut self, value: T, now: Tick) {
+        *self = Held {
+            value: Some((value, now)),
+            stale: false,
+        };
+    }
+
+    fn fresh(&self, now: Tick, timeout: Tick) -> Option<T> {
+        self.get().filter(|_| self.is_fresh(now, timeout))
+    }
+}
+
+/// What the receiver knows of the controller: the last accepted frames and values, and
+/// when they arrived. Changed only by accepted frames and by [`Receiver::poll`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct RxLink {
-    phase: Slot<PhaseMsg>,
-    context: Slot<ContextMsg>,
-    tip_state: Slot<TipStateMsg>,
+    phase_track: Track,
+    context_track: Track,
+    part_track: Track,
+    phase: Held<PhaseMsg>,
+    parts: [Held<[i16; 2]>; 3],
+    controller_time: Option<u32>,
 }
 
 impl RxLink {
     /// The last accepted phase command, stale or not; `None` before the first.
     pub fn phase(&self) -> Option<PhaseMsg> {
-        self.phase.value()
+        self.phase.get()
     }
 
-    /// The last accepted context, stale or not (use [`Receiver::inputs`] to act on it).
-    pub fn context(&self) -> Option<ContextMsg> {
-        self.context.value()
+    /// The last accepted value of a context part, stale or not (use
+    /// [`Receiver::inputs`] to act on it).
+    pub fn part(&self, part: ContextPart) -> Option<[i16; 2]> {
+        self.parts.get(part as usize).and_then(Held::get)
     }
 
-    /// The last accepted tip state, stale or not (use [`Receiver::inputs`] to act on it).
-    pub fn tip_state(&self) -> Option<TipStateMsg> {
-        self.tip_state.value()
+    /// The controller's time (µs) in the last accepted broadcast context frame.
+    pub const fn controller_time(&self) -> Option<u32> {
+        self.controller_time
     }
 }
 
@@ -242,11 +348,24 @@ pub enum Accepted {
         /// none): the caller switches the detector to the phase.
         changed: bool,
     },
-    /// A context frame.
-    Context(ContextMsg),
-    /// A tip state frame.
-    TipState(TipStateMsg),
+    /// A broadcast context frame of this fingertip's group.
+    Context {
+        /// The frame's counter.
+        counter: Counter,
+        /// This fingertip's slot; `None` when the controller left it empty.
+        slot: Option<ContextSlot>,
+        /// The controller's time, µs.
+        time_us: u32,
+    },
+    /// One part of this fingertip's context (classic CAN).
+    ContextPart(ContextPartMsg),
 }
+
+/// A received frame that passed [`Receiver::decode`]'s checks, waiting for
+/// [`Receiver::accept`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Decoded(Accepted);
 
 /// Which of the controller's messages are fresh (accepted within their timeout).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -254,13 +373,13 @@ pub enum Accepted {
 pub struct Freshness {
     /// The phase command is fresh.
     pub phase: bool,
-    /// The context (desired velocity and acceleration) is fresh.
+    /// The desired velocity and acceleration are fresh.
     pub context: bool,
-    /// The tip state (position error) is fresh.
+    /// The tip position error is fresh.
     pub tip_state: bool,
 }
 
-/// The controller's inputs to the detector at a tick: `None` where the message is stale
+/// The controller's inputs to the detector at a tick: `None` where the value is stale
 /// or was never received, so the caller flags the channels faulty.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -281,8 +400,6 @@ pub enum RxConfigError {
     PhaseCount(u8),
     /// A timeout must be within 1..=2³¹−1 ticks.
     Timeout(Tick),
-    /// The largest counter step accepted must be within 1..=14.
-    MaxCounterDelta(u8),
 }
 
 impl fmt::Display for RxConfigError {
@@ -290,9 +407,6 @@ impl fmt::Display for RxConfigError {
         match self {
             RxConfigError::PhaseCount(n) => write!(f, "phase count {n} is not within 1..=8"),
             RxConfigError::Timeout(t) => write!(f, "timeout {t} ticks is not within 1..2^31"),
-            RxConfigError::MaxCounterDelta(d) => {
-                write!(f, "max counter delta {d} is not within 1..=14")
-            }
         }
     }
 }
@@ -305,17 +419,12 @@ pub struct Receiver {
     phase_count: u8,
     context_timeout: Tick,
     phase_timeout: Tick,
-    max_counter_delta: u8,
 }
 
 impl Receiver {
-    /// The default largest counter step accepted: up to two frames lost in a row.
-    pub const DEFAULT_MAX_COUNTER_DELTA: u8 = 3;
-
     /// A receiver for node `node`, whose configuration has `phase_count` phases.
-    /// Context and tip state go stale `context_timeout` ticks after the last accepted
-    /// frame, the phase after `phase_timeout` ticks (e.g. 100 and 500 ticks: 20 ms and
-    /// 100 ms at 5 kHz).
+    /// Context goes stale `context_timeout` ticks after its last good frame, the phase
+    /// after `phase_timeout` ticks (e.g. 100 and 500 ticks: 20 ms and 100 ms at 5 kHz).
     pub const fn new(
         node: NodeId,
         phase_count: u8,
@@ -336,17 +445,7 @@ impl Receiver {
             phase_count,
             context_timeout,
             phase_timeout,
-            max_counter_delta: Receiver::DEFAULT_MAX_COUNTER_DELTA,
         })
-    }
-
-    /// The same receiver accepting counter steps up to `delta` (1..=14).
-    pub const fn with_max_counter_delta(mut self, delta: u8) -> Result<Receiver, RxConfigError> {
-        if delta == 0 || delta > 14 {
-            return Err(RxConfigError::MaxCounterDelta(delta));
-        }
-        self.max_counter_delta = delta;
-        Ok(self)
     }
 
     /// The node this receiver listens for.
@@ -354,8 +453,19 @@ impl Receiver {
         self.node
     }
 
+    /// The raw identifiers it accepts: its phase, its group's broadcast context, its
+    /// classic context parts (for the CAN controller's acceptance filter).
+    pub const fn identifiers(&self) -> [u16; 3] {
+        [
+            MessageKind::Phase.raw_id(self.node),
+            MessageKind::Context.raw_id(self.node),
+            MessageKind::ContextPart.raw_id(self.node),
+        ]
+    }
+
     /// Handles one received frame at tick `now`: accepts it (updating the state) or
     /// rejects it with a reason (counting it, changing nothing else). Never panics.
+    /// [`decode`](Receiver::decode) then [`accept`](Receiver::accept).
     pub fn receive(
         &self,
         state: &mut RxState,
@@ -363,30 +473,54 @@ impl Receiver {
         id: Id,
         data: &[u8],
     ) -> Result<Accepted, RejectReason> {
-        match self.check(&state.link, now, id, data) {
+        self.accept(state, now, self.decode(id, data))
+    }
+
+    /// The checks of a received frame that need no state: the identifier, the length, the
+    /// CRC, every value's range, the phase configured. Pure: the firmware runs it before
+    /// taking the lock on the state, where only [`accept`](Receiver::accept)'s few checks
+    /// run.
+    pub fn decode(&self, id: Id, data: &[u8]) -> Result<Decoded, RejectReason> {
+        let group = ContextGroup::of(self.node);
+        match MessageKind::from_id(id) {
+            Some((MessageKind::Phase | MessageKind::ContextPart, Address::Node(n)))
+                if n == self.node => {}
+            Some((MessageKind::Context, Address::Group(g))) if g == group => {}
+            _ => return Err(RejectReason::UnknownId),
+        }
+        let (_, message) = Message::decode(id, data).map_err(|e| RejectReason::from_decode(&e))?;
+        Ok(Decoded(match message {
+            Message::Phase(m) if m.phase >= self.phase_count => {
+                return Err(RejectReason::PhaseNotConfigured);
+            }
+            Message::Phase(command) => Accepted::Phase {
+                command,
+                changed: true,
+            },
+            Message::Context(m) => Accepted::Context {
+                counter: m.counter,
+                slot: m.slot_of(group, self.node),
+                time_us: m.time_us,
+            },
+            Message::ContextPart(m) => Accepted::ContextPart(m),
+            // Unreachable: the identifier was checked above.
+            _ => return Err(RejectReason::UnknownId),
+        }))
+    }
+
+    /// Takes a frame [`decode`](Receiver::decode) passed (or the reason it did not) into
+    /// the state at tick `now`: the counter rule, then the new values; a rejection is
+    /// counted and changes nothing else.
+    pub fn accept(
+        &self,
+        state: &mut RxState,
+        now: Tick,
+        decoded: Result<Decoded, RejectReason>,
+    ) -> Result<Accepted, RejectReason> {
+        match decoded.and_then(|d| self.sequence(&state.link, now, d.0)) {
             Ok((accepted, lost)) => {
                 state.counts.lost_frames = state.counts.lost_frames.saturating_add(lost);
-                let link = &mut state.link;
-                match accepted {
-                    Accepted::Phase { command, .. } => {
-                        link.phase = Slot {
-                            last: Some((command, now)),
-                            stale: false,
-                        }
-                    }
-                    Accepted::Context(m) => {
-                        link.context = Slot {
-                            last: Some((m, now)),
-                            stale: false,
-                        }
-                    }
-                    Accepted::TipState(m) => {
-                        link.tip_state = Slot {
-                            last: Some((m, now)),
-                            stale: false,
-                        }
-                    }
-                }
+                self.apply(&mut state.link, now, &accepted);
                 Ok(accepted)
             }
             Err(reason) => {
@@ -396,81 +530,84 @@ impl Receiver {
         }
     }
 
-    /// Validation without side effects: the accepted frame and the frames lost before it.
-    fn check(
+    fn apply(&self, link: &mut RxLink, now: Tick, accepted: &Accepted) {
+        match *accepted {
+            Accepted::Phase { command, .. } => {
+                link.phase_track.accept(now, command.counter, None);
+                link.phase.set(command, now);
+            }
+            Accepted::Context {
+                counter,
+                slot,
+                time_us,
+            } => {
+                link.context_track.accept(now, counter, Some(time_us));
+                if let Some(s) = slot {
+                    for part in ContextPart::ALL {
+                        if let Some(h) = link.parts.get_mut(part as usize) {
+                            h.set(s.part(part), now);
+                        }
+                    }
+                }
+                link.controller_time = Some(time_us);
+            }
+            Accepted::ContextPart(m) => {
+                link.part_track.accept(now, m.counter, None);
+                if let Some(h) = link.parts.get_mut(m.part as usize) {
+                    h.set(m.value, now);
+                }
+            }
+        }
+    }
+
+    /// The counter rule for a decoded frame: the frame (a phase command's change worked
+    /// out) and the frames lost before it.
+    fn sequence(
         &self,
         link: &RxLink,
         now: Tick,
-        id: Id,
-        data: &[u8],
+        frame: Accepted,
     ) -> Result<(Accepted, u32), RejectReason> {
-        match MessageKind::from_id(id) {
-            Some((MessageKind::Phase | MessageKind::Context | MessageKind::TipState, node))
-                if node == self.node => {}
-            _ => return Err(RejectReason::UnknownId),
-        }
-        let (_, message) = Message::decode(id, data).map_err(|e| RejectReason::from_decode(&e))?;
-        let lost = match message {
-            Message::Phase(m) => {
-                if m.phase >= self.phase_count {
-                    return Err(RejectReason::PhaseNotConfigured);
-                }
-                let lost = self.sequence(&link.phase, now, self.phase_timeout, m.counter)?;
+        match frame {
+            Accepted::Phase { command, .. } => {
+                let lost =
+                    link.phase_track
+                        .check(now, self.phase_timeout, command.counter, None)?;
                 let changed = link
                     .phase
-                    .value()
-                    .is_none_or(|p| (p.phase, p.sequence) != (m.phase, m.sequence));
-                return Ok((
-                    Accepted::Phase {
-                        command: m,
-                        changed,
-                    },
-                    lost,
-                ));
+                    .get()
+                    .is_none_or(|p| (p.phase, p.sequence) != (command.phase, command.sequence));
+                Ok((Accepted::Phase { command, changed }, lost))
             }
-            Message::Context(m) => (
-                Accepted::Context(m),
-                self.sequence(&link.context, now, self.context_timeout, m.counter)?,
-            ),
-            Message::TipState(m) => (
-                Accepted::TipState(m),
-                self.sequence(&link.tip_state, now, self.context_timeout, m.counter)?,
-            ),
-            // Unreachable: the identifier was checked above.
-            _ => return Err(RejectReason::UnknownId),
-        };
-        Ok(lost)
-    }
-
-    /// The counter rule: frames lost before this one, or a rejection.
-    fn sequence<T: Copy + HasCounter>(
-        &self,
-        slot: &Slot<T>,
-        now: Tick,
-        timeout: Tick,
-        counter: super::Counter,
-    ) -> Result<u32, RejectReason> {
-        if slot.is_stale(now, timeout) {
-            return Ok(0);
-        }
-        let Some((last, _)) = slot.last else {
-            return Ok(0);
-        };
-        let delta = last.counter().delta_to(counter);
-        if delta == 0 || delta > self.max_counter_delta {
-            Err(RejectReason::Sequence)
-        } else {
-            Ok(u32::from(delta - 1))
+            Accepted::Context {
+                counter, time_us, ..
+            } => {
+                let lost =
+                    link.context_track
+                        .check(now, self.context_timeout, counter, Some(time_us))?;
+                Ok((frame, lost))
+            }
+            Accepted::ContextPart(m) => {
+                let lost = link
+                    .part_track
+                    .check(now, self.context_timeout, m.counter, None)?;
+                Ok((frame, lost))
+            }
         }
     }
 
     /// Which messages are fresh at `now`. Pure.
     pub fn freshness(&self, state: &RxState, now: Tick) -> Freshness {
         let l = &state.link;
+        let fresh = |p: ContextPart| {
+            l.parts
+                .get(p as usize)
+                .is_some_and(|h| h.is_fresh(now, self.context_timeout))
+        };
         Freshness {
-            phase: !l.phase.is_stale(now, self.phase_timeout),
-            context: !l.context.is_stale(now, self.context_timeout),
-            tip_state: !l.tip_state.is_stale(now, self.context_timeout),
+            phase: l.phase.is_fresh(now, self.phase_timeout),
+            context: fresh(ContextPart::Velocity) && fresh(ContextPart::Acceleration),
+            tip_state: fresh(ContextPart::PositionError),
         }
     }
 
@@ -482,167 +619,211 @@ impl Receiver {
     /// Once per tick: latches staleness and counts each context or tip state going from
     /// fresh to stale as an episode. Returns the freshness at `now`.
     pub fn poll(&self, state: &mut RxState, now: Tick) -> Freshness {
+        let before = self.latched(&state.link);
         let f = self.freshness(state, now);
         let l = &mut state.link;
         l.phase.stale = !f.phase;
-        let mut episodes = 0u32;
-        if !f.context && !l.context.stale {
-            episodes += 1;
+        for h in l.parts.iter_mut() {
+            h.stale = !h.is_fresh(now, self.context_timeout);
         }
-        if !f.tip_state && !l.tip_state.stale {
-            episodes += 1;
-        }
-        l.context.stale = !f.context;
-        l.tip_state.stale = !f.tip_state;
+        l.phase_track.latch(now, self.phase_timeout);
+        l.context_track.latch(now, self.context_timeout);
+        l.part_track.latch(now, self.context_timeout);
+        let episodes =
+            u32::from(before.context && !f.context) + u32::from(before.tip_state && !f.tip_state);
         state.counts.stale_episodes = state.counts.stale_episodes.saturating_add(episodes);
         f
     }
 
-    /// The controller's inputs at `now`, withheld where stale.
-    pub fn inputs(&self, state: &RxState, now: Tick) -> ControllerInputs {
-        let f = self.freshness(state, now);
-        let l = &state.link;
-        let ctx = l.context.value().filter(|_| f.context);
-        ControllerInputs {
-            vel_des: ctx.map(|c| c.vel_des_signals()),
-            acc_des: ctx.map(|c| c.acc_des_signals()),
-            pos_err: l
-                .tip_state
-                .value()
-                .filter(|_| f.tip_state)
-                .map(|t| t.pos_err_signals()),
+    /// The freshness as last latched (values accepted since count as fresh).
+    fn latched(&self, l: &RxLink) -> Freshness {
+        let up = |p: ContextPart| l.parts.get(p as usize).is_some_and(|h| !h.stale);
+        Freshness {
+            phase: !l.phase.stale,
+            context: up(ContextPart::Velocity) && up(ContextPart::Acceleration),
+            tip_state: up(ContextPart::PositionError),
         }
     }
-}
 
-trait HasCounter {
-    fn counter(&self) -> super::Counter;
-}
-
-impl HasCounter for PhaseMsg {
-    fn counter(&self) -> super::Counter {
-        self.counter
-    }
-}
-
-impl HasCounter for ContextMsg {
-    fn counter(&self) -> super::Counter {
-        self.counter
-    }
-}
-
-impl HasCounter for TipStateMsg {
-    fn counter(&self) -> super::Counter {
-        self.counter
+    /// The controller's inputs at `now`, withheld where stale.
+    pub fn inputs(&self, state: &RxState, now: Tick) -> ControllerInputs {
+        let part = |p: ContextPart| {
+            state
+                .link
+                .parts
+                .get(p as usize)
+                .and_then(|h| h.fresh(now, self.context_timeout))
+                .map(|raw| p.signals(raw))
+        };
+        let f = self.freshness(state, now);
+        ControllerInputs {
+            vel_des: part(ContextPart::Velocity).filter(|_| f.context),
+            acc_des: part(ContextPart::Acceleration).filter(|_| f.context),
+            pos_err: part(ContextPart::PositionError),
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{Counter, StandardId};
+    use crate::codec::ContextMsg;
+    use crate::{CanFrame, StandardId};
 
-    const NODE: u8 = 4;
-
-    fn rx() -> Receiver {
-        Receiver::new(NodeId::new(NODE).unwrap(), 3, 100, 500).unwrap()
-    }
+    const NODE: u8 = 7;
 
     fn node() -> NodeId {
         NodeId::new(NODE).unwrap()
     }
 
-    fn ctx(counter: u8, vx: i16) -> (Id, heapless::Vec<u8, 8>) {
-        let f = ContextMsg {
-            counter: Counter::new(counter).unwrap(),
-            vel_des: [vx, 0],
-            acc_des: [0, 0],
-        }
-        .encode(node())
-        .unwrap();
-        (Id::Standard(f.id()), f.data().iter().copied().collect())
+    fn rx() -> Receiver {
+        Receiver::new(node(), 3, 100, 500).unwrap()
     }
 
-    fn phase(counter: u8, p: u8, seq: u8) -> (Id, heapless::Vec<u8, 8>) {
-        let f = PhaseMsg {
-            counter: Counter::new(counter).unwrap(),
+    fn slot(vx: i16) -> ContextSlot {
+        ContextSlot {
+            vel_des: [vx, 0],
+            acc_des: [0, 0],
+            pos_err: [0, 0],
+        }
+    }
+
+    /// A broadcast context frame of node 7's group (nodes 5..=9) with node 7's slot filled.
+    fn ctx(counter: u8, time_us: u32, vx: i16) -> CanFrame {
+        let mut m = ContextMsg {
+            counter: Counter(counter),
+            time_us,
+            ..ContextMsg::default()
+        };
+        m.slots[2] = Some(slot(vx));
+        m.encode(ContextGroup::of(node())).unwrap()
+    }
+
+    fn phase(counter: u8, p: u8, seq: u8) -> CanFrame {
+        PhaseMsg {
+            counter: Counter(counter),
             phase: p,
             sequence: seq,
         }
         .encode(node())
-        .unwrap();
-        (Id::Standard(f.id()), f.data().iter().copied().collect())
+        .unwrap()
+    }
+
+    fn give(
+        r: &Receiver,
+        s: &mut RxState,
+        now: Tick,
+        f: &CanFrame,
+    ) -> Result<Accepted, RejectReason> {
+        r.receive(s, now, Id::Standard(f.id()), f.data())
     }
 
     #[test]
     fn accepts_a_good_sequence_and_counts_lost_frames() {
         let r = rx();
         let mut s = RxState::new();
-        for (t, c) in [(0u32, 5u8), (10, 6), (20, 8), (30, 11)] {
-            let (id, d) = ctx(c, i16::from(c));
+        for (t, c) in [(0u32, 5u8), (5, 6), (10, 8), (15, 11)] {
             assert!(matches!(
-                r.receive(&mut s, t, id, &d),
-                Ok(Accepted::Context(_))
+                give(&r, &mut s, t, &ctx(c, 1000 * u32::from(c), i16::from(c))),
+                Ok(Accepted::Context { slot: Some(_), .. })
             ));
         }
         assert_eq!(s.counts().lost_frames(), 1 + 2);
-        assert_eq!(s.link().context().unwrap().vel_des[0], 11);
+        assert_eq!(s.link().part(ContextPart::Velocity), Some([11, 0]));
+        assert_eq!(s.link().controller_time(), Some(11_000));
     }
 
     #[test]
-    fn rejects_repeats_and_jumps_without_changing_state() {
+    fn resynchronizes_on_the_first_good_frame_after_a_loss() {
         let r = rx();
         let mut s = RxState::new();
-        let (id, d) = ctx(5, 1);
-        r.receive(&mut s, 0, id, &d).unwrap();
+        give(&r, &mut s, 0, &ctx(250, 0, 1)).unwrap();
+        // 40 frames lost across the counter's wrap: accepted at once, every loss counted,
+        // and the frames after it too.
+        for (k, c) in [35u8, 36, 37].into_iter().enumerate() {
+            let t = 41 + k as u32;
+            give(&r, &mut s, t, &ctx(c, 1000 * t, 2)).unwrap();
+        }
+        assert_eq!(s.counts().lost_frames(), 40);
+        assert_eq!(s.counts().rejected().total(), 0);
+    }
+
+    #[test]
+    fn rejects_repetitions_and_old_frames_without_changing_state() {
+        let r = rx();
+        let mut s = RxState::new();
+        give(&r, &mut s, 0, &ctx(5, 5000, 1)).unwrap();
         let before = *s.link();
-        for c in [5u8, 9, 4] {
-            let (id, d) = ctx(c, 2);
-            assert_eq!(r.receive(&mut s, 1, id, &d), Err(RejectReason::Sequence));
+        // The same frame again; a newer counter with an older time (an old frame).
+        for f in [ctx(5, 5000, 1), ctx(6, 4000, 2), ctx(7, 5000, 3)] {
+            assert_eq!(give(&r, &mut s, 1, &f), Err(RejectReason::Sequence));
         }
         assert_eq!(*s.link(), before);
         assert_eq!(s.counts().rejected().get(RejectReason::Sequence), 3);
-        // After the timeout any counter resynchronizes.
-        let (id, d) = ctx(5, 3);
-        assert!(r.receive(&mut s, 101, id, &d).is_ok());
+        // After the timeout a controller that restarted (time back at 0) is accepted,
+        // with nothing counted lost.
+        r.poll(&mut s, 101);
+        give(&r, &mut s, 101, &ctx(9, 0, 3)).unwrap();
+        assert_eq!(s.counts().lost_frames(), 0);
+        // ... but still not the very same frame twice.
+        assert_eq!(
+            give(&r, &mut s, 400, &ctx(9, 0, 3)),
+            Err(RejectReason::Sequence)
+        );
     }
 
     #[test]
     fn rejects_each_kind_of_bad_frame() {
         let r = rx();
         let mut s = RxState::new();
-        let (id, d) = ctx(0, 0);
+        let f = ctx(0, 0, 0);
+        let id = Id::Standard(f.id());
         assert_eq!(
-            r.receive(&mut s, 0, id, &d[..7]),
+            r.receive(&mut s, 0, id, &f.data()[..48]),
             Err(RejectReason::WrongLength)
         );
-        let mut bad = d.clone();
-        bad[3] ^= 0x40;
+        let mut bad = f.data().to_vec();
+        bad[20] ^= 0x40;
         assert_eq!(r.receive(&mut s, 0, id, &bad), Err(RejectReason::BadCrc));
-        let other = Id::Standard(MessageKind::Context.id(NodeId::new(5).unwrap()));
+        // Another group's context, another node's phase, an event, an extended identifier.
+        let other = MessageKind::Context.id(NodeId::new(2).unwrap());
         assert_eq!(
-            r.receive(&mut s, 0, other, &d),
+            r.receive(&mut s, 0, Id::Standard(other), f.data()),
             Err(RejectReason::UnknownId)
         );
+        let p = PhaseMsg {
+            counter: Counter(0),
+            phase: 0,
+            sequence: 0,
+        }
+        .encode(NodeId::new(8).unwrap())
+        .unwrap();
+        assert_eq!(give(&r, &mut s, 0, &p), Err(RejectReason::UnknownId));
         let ev = Id::Standard(MessageKind::Event.id(node()));
-        assert_eq!(r.receive(&mut s, 0, ev, &d), Err(RejectReason::UnknownId));
-        let ext = Id::Extended(crate::ExtendedId::new(0x0A4).unwrap());
-        assert_eq!(r.receive(&mut s, 0, ext, &d), Err(RejectReason::UnknownId));
-        let (pid, pd) = phase(0, 3, 0);
         assert_eq!(
-            r.receive(&mut s, 0, pid, &pd),
+            r.receive(&mut s, 0, ev, &[0; 8]),
+            Err(RejectReason::UnknownId)
+        );
+        let ext = Id::Extended(crate::ExtendedId::new(0x144).unwrap());
+        assert_eq!(
+            r.receive(&mut s, 0, ext, &[0; 5]),
+            Err(RejectReason::UnknownId)
+        );
+        assert_eq!(
+            give(&r, &mut s, 0, &phase(0, 3, 0)),
             Err(RejectReason::PhaseNotConfigured)
         );
         // Phase 9 with a correct CRC: out of range.
-        let mut raw = [0u8, 0, 9, 0];
-        raw[0] = crate::e2e::crc(MessageKind::Phase.id(node()), &raw).unwrap();
+        let pid = MessageKind::Phase.id(node());
+        let mut raw = [0u8, 0, 0, 9, 0];
+        crate::e2e::seal(pid, &mut raw);
         assert_eq!(
-            r.receive(&mut s, 0, pid, &raw),
+            r.receive(&mut s, 0, Id::Standard(pid), &raw),
             Err(RejectReason::OutOfRange)
         );
         let counts = s.counts().rejected();
-        assert_eq!(counts.total(), 7);
-        assert_eq!(counts.get(RejectReason::UnknownId), 3);
+        assert_eq!(counts.total(), 8);
+        assert_eq!(counts.get(RejectReason::UnknownId), 4);
         assert_eq!(*s.link(), RxLink::default());
         let _ = StandardId::ZERO;
     }
@@ -653,22 +834,75 @@ mod tests {
         let mut s = RxState::new();
         assert!(r.is_context_stale(&s, 0));
         assert_eq!(r.inputs(&s, 0), ControllerInputs::default());
-        let (id, d) = ctx(1, 500);
-        r.receive(&mut s, 1000, id, &d).unwrap();
+        give(&r, &mut s, 1000, &ctx(1, 0, 500)).unwrap();
         assert!(r.poll(&mut s, 1100).context);
         let v = r.inputs(&s, 1100).vel_des.unwrap();
         assert!((v[0].to_f64() - 0.05).abs() < 1e-4);
+        assert!(r.inputs(&s, 1100).pos_err.is_some());
         assert!(!r.poll(&mut s, 1101).context);
         assert!(r.is_context_stale(&s, 1101));
-        assert_eq!(r.inputs(&s, 1101).vel_des, None);
-        assert_eq!(s.counts().stale_episodes(), 1);
-        // Still stale, no second episode; the latch holds even if the tick wraps round.
+        assert_eq!(r.inputs(&s, 1101), ControllerInputs::default());
+        assert_eq!(s.counts().stale_episodes(), 2, "context and tip state");
+        // Still stale, no new episode; the latch holds even if the tick wraps round.
         r.poll(&mut s, 5000);
         assert!(r.is_context_stale(&s, 1050u32.wrapping_add(u32::MAX)));
-        assert_eq!(s.counts().stale_episodes(), 1);
-        let (id, d) = ctx(9, 1);
-        r.receive(&mut s, 6000, id, &d).unwrap();
+        assert_eq!(s.counts().stale_episodes(), 2);
+        give(&r, &mut s, 6000, &ctx(9, 10, 1)).unwrap();
         assert!(!r.is_context_stale(&s, 6000));
+    }
+
+    #[test]
+    fn an_empty_slot_keeps_the_counter_but_refreshes_nothing() {
+        let r = rx();
+        let mut s = RxState::new();
+        give(&r, &mut s, 0, &ctx(1, 0, 5)).unwrap();
+        let empty = ContextMsg {
+            counter: Counter(2),
+            time_us: 1000,
+            ..ContextMsg::default()
+        }
+        .encode(ContextGroup::of(node()))
+        .unwrap();
+        assert!(matches!(
+            give(&r, &mut s, 90, &empty),
+            Ok(Accepted::Context { slot: None, .. })
+        ));
+        assert!(r.poll(&mut s, 100).context);
+        assert!(
+            !r.poll(&mut s, 101).context,
+            "aged from the frame that filled it"
+        );
+        give(&r, &mut s, 102, &ctx(3, 2000, 5)).unwrap();
+        assert_eq!(s.counts().lost_frames(), 0);
+    }
+
+    #[test]
+    fn classic_parts_refresh_each_their_own() {
+        let r = rx();
+        let mut s = RxState::new();
+        let part = |c: u8, part: ContextPart, v: i16| {
+            ContextPartMsg {
+                counter: Counter(c),
+                part,
+                value: [v, -v],
+            }
+            .encode(node())
+            .unwrap()
+        };
+        give(&r, &mut s, 0, &part(0, ContextPart::Velocity, 500)).unwrap();
+        give(&r, &mut s, 0, &part(1, ContextPart::Acceleration, 5)).unwrap();
+        let f = r.poll(&mut s, 0);
+        assert!(f.context && !f.tip_state);
+        give(&r, &mut s, 1, &part(3, ContextPart::PositionError, 7)).unwrap();
+        assert_eq!(s.counts().lost_frames(), 1);
+        let i = r.inputs(&s, 1);
+        assert!(i.vel_des.is_some() && i.acc_des.is_some() && i.pos_err.is_some());
+        // Velocity keeps coming, acceleration does not: the context is stale as a whole.
+        for t in [60u32, 101] {
+            give(&r, &mut s, t, &part(4 + t as u8, ContextPart::Velocity, 1)).unwrap();
+        }
+        assert!(!r.poll(&mut s, 101).context);
+        assert_eq!(r.inputs(&s, 101).vel_des, None);
     }
 
     #[test]
@@ -679,12 +913,13 @@ mod tests {
             Ok(Accepted::Phase { changed, .. }) => changed,
             other => panic!("{other:?}"),
         };
-        let (id, d) = phase(0, 1, 7);
-        assert!(changed(r.receive(&mut s, 0, id, &d)));
-        let (id, d) = phase(1, 1, 7);
-        assert!(!changed(r.receive(&mut s, 10, id, &d)));
-        let (id, d) = phase(2, 1, 8);
-        assert!(changed(r.receive(&mut s, 20, id, &d)));
+        assert!(changed(give(&r, &mut s, 0, &phase(0, 1, 7))));
+        assert!(!changed(give(&r, &mut s, 10, &phase(1, 1, 7))));
+        assert!(changed(give(&r, &mut s, 20, &phase(2, 1, 8))));
+        assert_eq!(
+            give(&r, &mut s, 30, &phase(2, 1, 8)),
+            Err(RejectReason::Sequence)
+        );
     }
 
     #[test]
@@ -693,9 +928,6 @@ mod tests {
         assert_eq!(Receiver::new(n, 0, 1, 1), Err(RxConfigError::PhaseCount(0)));
         assert_eq!(Receiver::new(n, 9, 1, 1), Err(RxConfigError::PhaseCount(9)));
         assert_eq!(Receiver::new(n, 1, 0, 1), Err(RxConfigError::Timeout(0)));
-        assert_eq!(
-            rx().with_max_counter_delta(15),
-            Err(RxConfigError::MaxCounterDelta(15))
-        );
+        assert_eq!(rx().identifiers(), [0x147, 0x121, 0x137]);
     }
 }

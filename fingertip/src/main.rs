@@ -21,7 +21,7 @@ use fingertip::replay::{self, DecisionRecord};
 use fingertip::score::{self, Outcome, ScenarioReport};
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::{Trace, TraceReader};
-use fingertip_can::{NodeId, Status, Transmitter, TxState};
+use fingertip_can::{BusFormat, NodeId, Status, Transmitter, TxState};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
@@ -77,12 +77,15 @@ enum Command {
         #[arg(long)]
         json: bool,
         /// Also write the CAN frames the firmware would have sent, timestamped, in candump
-        /// log format (`(sec.usec) can0 ID#HEX`).
+        /// log format (`(sec.usec) can0 ID##1HEX` for CAN FD frames, `ID#HEX` classic).
         #[arg(long)]
         candump: Option<PathBuf>,
-        /// The fingertip's CAN node id (0..=15) for --candump.
+        /// The fingertip's CAN node id (0..=14) for --candump.
         #[arg(long, default_value_t = 0)]
         node: u8,
+        /// With --candump: the frames of a classic CAN bus instead of CAN FD.
+        #[arg(long, requires = "candump")]
+        classic: bool,
     },
     /// Decode a candump log (log or screen format): confidences, events, status, and every
     /// malformed line, bad CRC and counter gap by line number.
@@ -92,10 +95,10 @@ enum Command {
         /// Configuration whose event names to show; the approach configuration when absent.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Only this node's frames (0..=15).
+        /// Only this node's frames (0..=14), and the context frames of its group.
         #[arg(long)]
         node: Option<u8>,
-        /// Print events, status and problems only, not every confidence page.
+        /// Print events, status and problems only, not every stream sample.
         #[arg(long)]
         quiet: bool,
         /// Plot the confidence stream and events here (.png or .svg).
@@ -110,7 +113,7 @@ enum Command {
         /// Configuration whose event names to show; the approach configuration when absent.
         #[arg(long)]
         config: Option<PathBuf>,
-        /// Only this node's frames (0..=15).
+        /// Only this node's frames (0..=14), and the context frames of its group.
         #[arg(long)]
         node: Option<u8>,
         /// Print events, status and problems only.
@@ -126,23 +129,27 @@ enum Command {
         #[arg(long)]
         candump: Option<PathBuf>,
     },
-    /// Worst-case CAN bus load and event-frame latency for N fingertips.
+    /// Worst-case CAN bus load (CAN FD, or classic CAN) and event-frame latency for N
+    /// fingertips, both directions, bit stuffing in both phases.
     Busload {
-        /// Fingertips on the bus (1..=16).
+        /// Fingertips on the bus (1..=15).
         #[arg(long, default_value_t = 1)]
         fingertips: u32,
-        /// Ticks per confidence-stream sample.
+        /// Ticks per confidence-stream sample (default 20 on CAN FD, 100 with --classic).
         #[arg(long)]
         decimation: Option<u32>,
-        /// Context frames per second to each fingertip.
+        /// Control cycles per second: the controller's context to each fingertip.
         #[arg(long)]
         context_hz: Option<f64>,
-        /// Tip-state frames per second to each fingertip.
-        #[arg(long)]
-        tip_state_hz: Option<f64>,
-        /// Bit rate in bit/s.
+        /// Arbitration (nominal) bit rate in bit/s.
         #[arg(long)]
         bitrate: Option<u32>,
+        /// CAN FD data-phase bit rate in bit/s.
+        #[arg(long, conflicts_with = "classic")]
+        data_bitrate: Option<u32>,
+        /// Classic CAN instead of CAN FD.
+        #[arg(long)]
+        classic: bool,
     },
     /// Randomized runs of every scenario, or labelled recordings (`--traces`): detections,
     /// errors, latency, false alarms.
@@ -311,9 +318,15 @@ fn run(cli: Cli) -> Result<()> {
             json,
             candump,
             node,
+            classic,
         } => {
+            let format = if classic {
+                BusFormat::Classic
+            } else {
+                BusFormat::Fd
+            };
             let can = match candump {
-                Some(path) => Some((path, node_id(node)?)),
+                Some(path) => Some((path, node_id(node)?, format)),
                 None => None,
             };
             replay_cmd(
@@ -353,21 +366,26 @@ fn run(cli: Cli) -> Result<()> {
             fingertips,
             decimation,
             context_hz,
-            tip_state_hz,
             bitrate,
+            data_bitrate,
+            classic,
         } => {
             let mut cfg = BusConfig::with_fingertips(fingertips);
+            if classic {
+                cfg.format = BusFormat::Classic;
+                cfg.stream_decimation = u32::from(cfg.format.default_stream_decimation());
+            }
             if let Some(d) = decimation {
                 cfg.stream_decimation = d;
             }
             if let Some(h) = context_hz {
                 cfg.context_hz = h;
             }
-            if let Some(h) = tip_state_hz {
-                cfg.tip_state_hz = h;
-            }
             if let Some(b) = bitrate {
                 cfg.bitrate = b;
+            }
+            if let Some(b) = data_bitrate {
+                cfg.data_bitrate = b;
             }
             let report = busload::analyse(&cfg)?;
             busload::write_report(&cfg, &report, &mut std::io::stdout().lock())?;
@@ -459,7 +477,7 @@ fn load_detector(path: Option<&Path>) -> Result<(Detector, String)> {
 
 /// The CAN node id of `--node`.
 fn node_id(node: u8) -> Result<NodeId> {
-    NodeId::new(node).ok_or_else(|| anyhow!("--node {node} must be within 0..=15"))
+    NodeId::new(node).ok_or_else(|| anyhow!("--node {node} must be within 0..=14"))
 }
 
 fn simulate(
@@ -545,7 +563,7 @@ fn replay_cmd(
     out: Option<&Path>,
     plot_to: Option<&Path>,
     json: bool,
-    candump: Option<(PathBuf, NodeId)>,
+    candump: Option<(PathBuf, NodeId, BusFormat)>,
 ) -> Result<()> {
     let inputs: Vec<&Path> = std::iter::once(path).chain(config).collect();
     // Staged in this order: confidences, figure, CAN log; committed together at the end.
@@ -554,7 +572,7 @@ fn replay_cmd(
         &[
             out.map(|p| (p, Kind::File)),
             plot_to.map(|p| (p, Kind::Figure)),
-            candump.as_ref().map(|(p, _)| (p.as_path(), Kind::File)),
+            candump.as_ref().map(|(p, _, _)| (p.as_path(), Kind::File)),
         ],
     )?;
     let mut next = 0..;
@@ -582,7 +600,9 @@ fn replay_cmd(
         None => None,
     };
     let mut can = match (can_k, &candump) {
-        (Some(k), Some((_, node))) => Some(CanLog::start(writer(k)?, &detector, *node)?),
+        (Some(k), Some((_, node, format))) => {
+            Some(CanLog::start(writer(k)?, &detector, *node, *format)?)
+        }
         _ => None,
     };
     let mut figure = plot_to.map(|_| Decimated::new(detector.events(), PLOT_POINTS));
@@ -750,10 +770,10 @@ struct CanLog<W: std::io::Write> {
 }
 
 impl<W: std::io::Write> CanLog<W> {
-    fn start(out: W, detector: &Detector, node: NodeId) -> Result<Self> {
+    fn start(out: W, detector: &Detector, node: NodeId, format: BusFormat) -> Result<Self> {
         Ok(CanLog {
             out,
-            tx: Transmitter::with_defaults(node, detector.rate_hz().round() as u32)?,
+            tx: Transmitter::with_defaults(node, format, detector.rate_hz().round() as u32)?,
             state: TxState::new(),
             status: Status {
                 tick_rate_hz: detector.rate_hz().round() as u16,
@@ -899,23 +919,41 @@ fn stream_series(
     log: &decode::DecodedLog,
     opts: &DecodeOptions,
 ) -> (Vec<f64>, Series, Vec<DecisionRecord>) {
-    use fingertip_can::Message;
     let mut t = Vec::new();
     let mut current: Vec<f64> = Vec::new();
     let mut series: Series = Vec::new();
+    // The last streamed confidence of each event (by node), for the events' markers.
+    let mut last: std::collections::HashMap<(u8, usize), f64> = Default::default();
+    let mut decisions = Vec::new();
+    let mut t0 = None;
     for r in log.records() {
-        let (Message::Confidence(m), Some(time)) = (&r.message, r.time) else {
+        let Some(time) = r.time else { continue };
+        if let fingertip_can::Message::Event(m) = &r.message {
+            let event = usize::from(m.event.0);
+            let at = time - *t0.get_or_insert(time);
+            decisions.push(DecisionRecord {
+                event: opts.event_name(event),
+                level: m.level.name(),
+                confidence: last
+                    .get(&(r.address.index(), event))
+                    .copied()
+                    .unwrap_or(1.0),
+                onset_s: at - f64::from(m.onset_age) / opts.tick_rate_hz,
+                t_s: at,
+            });
             continue;
-        };
-        for (k, c) in m.confidences.iter().enumerate() {
-            if m.evaluated & (1 << k) == 0 {
-                continue;
+        }
+        let values = r.stream_values();
+        if values.is_empty() {
+            continue;
+        }
+        t0.get_or_insert(time);
+        for v in &values {
+            if current.len() <= v.event {
+                current.resize(v.event + 1, 0.0);
             }
-            let index = 3 * usize::from(m.page) + k;
-            if current.len() <= index {
-                current.resize(index + 1, 0.0);
-            }
-            current[index] = c.to_f64();
+            current[v.event] = v.confidence;
+            last.insert((r.address.index(), v.event), v.confidence);
         }
         t.push(time);
         for (index, value) in current.iter().enumerate() {
@@ -926,21 +964,8 @@ fn stream_series(
             series[index].1.push(*value);
         }
     }
-    let t0 = t.first().copied().unwrap_or(0.0);
+    let t0 = t0.unwrap_or(0.0);
     let t: Vec<f64> = t.iter().map(|x| x - t0).collect();
-    let decisions = log
-        .events()
-        .filter_map(|(r, m)| {
-            let time = r.time? - t0;
-            Some(DecisionRecord {
-                event: opts.event_name(usize::from(m.event.0)),
-                level: m.level.name(),
-                confidence: m.confidence.to_f64(),
-                onset_s: time - f64::from(m.onset_age) / opts.tick_rate_hz,
-                t_s: time,
-            })
-        })
-        .collect();
     (t, series, decisions)
 }
 

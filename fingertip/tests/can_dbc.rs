@@ -1,17 +1,19 @@
-//! The DBC is the contract: the published `fingertip-can/fingertip.dbc` and the codec in
-//! `fingertip_can` must agree, as judged by a third-party decoder (cantools, run from
-//! the venv at `.venv`, driven by `fingertip-can/python/dbc_check.py`).
+//! The DBCs are the contract: the published `fingertip-can/fingertip.dbc` (CAN FD) and
+//! `fingertip-can/fingertip-classic.dbc` and the codec in `fingertip_can` must agree, as
+//! judged by a third-party decoder (cantools, run from the venv at `.venv`, driven by
+//! `fingertip-can/python/dbc_check.py`).
 //!
 //! - Frames our codec encodes, cantools decodes to the same values, and its AUTOSAR E2E
-//!   profile 2 check accepts their CRC.
+//!   profile 5 check accepts their CRC.
 //! - Values cantools encodes from the DBC (CRC applied by cantools), our codec decodes to
 //!   the same values, byte for byte the frames it would send itself.
 //! - Values just outside each range are refused by both.
-//! - cantools reads the database as the specification table says.
+//! - cantools reads each database as the specification table says, CAN FD frames as CAN FD.
 //!
-//! Every message kind, every node, and the extremes of every range. Without the venv the
-//! cantools tests print a skip notice and pass, unless `FINGERTIP_REQUIRE_PYTHON=1`, when
-//! they fail. `FINGERTIP_BLESS=1` rewrites the committed DBC from the specification.
+//! Every message kind, every node and group, and the extremes of every range. Without the
+//! venv the cantools tests print a skip notice and pass, unless
+//! `FINGERTIP_REQUIRE_PYTHON=1`, when they fail. `FINGERTIP_BLESS=1` rewrites the committed
+//! DBCs from the specification.
 
 #![allow(clippy::unwrap_used, reason = "test code: a panic is the failure")]
 
@@ -20,20 +22,23 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
-use detector_core::{Confidence, EventId, Level};
+use detector_core::{Confidence, EventId, Level, MAX_EVENTS};
 use fingertip::can_tools::dbc::{self, Mux};
 use fingertip_can::{
-    CanFrame, ConfidenceMsg, ContextMsg, Counter, EventMsg, FaultFlags, Id, Message, MessageKind,
-    NodeId, PhaseMsg, ResetReason, StatusPage, TipStateMsg,
+    Address, BusFormat, CanFrame, ContextGroup, ContextMsg, ContextPart, ContextPartMsg,
+    ContextSlot, Counter, EventMsg, FaultFlags, Id, LevelState, Message, MessageKind, NodeId,
+    NodeIdSource, PhaseMsg, ResetReason, StatusMsg, StatusPage, StreamMsg, StreamPageMsg,
 };
 use serde_json::{Value, json};
+
+const FORMATS: [BusFormat; 2] = [BusFormat::Fd, BusFormat::Classic];
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-fn dbc_path() -> PathBuf {
-    root().join("fingertip-can/fingertip.dbc")
+fn dbc_path(format: BusFormat) -> PathBuf {
+    root().join(dbc::file_name(format))
 }
 
 /// The venv's interpreter, if it has cantools; otherwise skip, or fail when required.
@@ -81,157 +86,236 @@ fn run_python(py: &Path, request: &Value) -> Value {
     serde_json::from_slice(&out.stdout).expect("JSON answer")
 }
 
-fn c(n: u8) -> Counter {
-    Counter::new(n).unwrap()
-}
-
 fn conf(bits: u16) -> Confidence {
     Confidence::from_bits(bits).unwrap()
 }
 
-/// Messages covering every kind, page, flag and the ends of every range.
-fn samples() -> Vec<Message> {
+fn slot(v: i16, p: i16) -> ContextSlot {
+    ContextSlot {
+        vel_des: [v, -v],
+        acc_des: [-v, v],
+        pos_err: [p, -p],
+    }
+}
+
+/// Per-node messages covering every kind, page, flag and the ends of every range.
+fn node_samples() -> Vec<Message> {
     let mut v = Vec::new();
-    for (i, (e, level, cb, tick, age)) in [
-        (0u8, Level::Alert, 0u16, 0u16, 0u16),
-        (7, Level::Confirm, 32768, 65535, 65535),
-        (3, Level::Confirm, 1, 1, 1),
-        (5, Level::Alert, 32767, 40000, 123),
+    for (i, (e, level, tick, age)) in [
+        (0u8, Level::Alert, 0u16, 0u16),
+        (7, Level::Confirm, 65535, 65535),
+        (3, Level::Confirm, 1, 1),
     ]
     .into_iter()
     .enumerate()
     {
         v.push(Message::Event(EventMsg {
-            counter: c([0, 15, 7, 1][i]),
+            counter: Counter([0, 255, 7][i]),
             event: EventId(e),
             level,
-            confidence: conf(cb),
             tick,
             onset_age: age,
         }));
     }
-    for (ctr, phase, seq) in [(0, 0, 0), (15, 7, 255), (4, 3, 128)] {
+    for (ctr, phase, seq) in [(0, 0, 0), (255, 7, 255), (4, 3, 128)] {
         v.push(Message::Phase(PhaseMsg {
-            counter: c(ctr),
+            counter: Counter(ctr),
             phase,
             sequence: seq,
         }));
     }
-    for (ctr, vel, acc) in [
-        (0, [0, 0], [0, 0]),
-        (15, [4095, -4095], [-4095, 4095]),
-        (6, [-4095, 4095], [4095, -4095]),
-        (9, [1, -1], [-1, 1]),
-        (3, [500, -200], [1234, -2048]),
+    for (part, x) in [
+        (ContextPart::Velocity, 4095i16),
+        (ContextPart::Acceleration, -4095),
+        (ContextPart::PositionError, 32767),
+        (ContextPart::Velocity, 0),
     ] {
-        v.push(Message::Context(ContextMsg {
-            counter: c(ctr),
-            vel_des: vel,
-            acc_des: acc,
+        v.push(Message::ContextPart(ContextPartMsg {
+            counter: Counter(x as u8),
+            part,
+            value: [x, -x],
         }));
     }
-    for (ctr, p) in [
-        (0, [0, 0]),
-        (15, [32767, -32767]),
-        (8, [-32767, 32767]),
-        (2, [1, -1]),
-    ] {
-        v.push(Message::TipState(TipStateMsg {
-            counter: c(ctr),
-            pos_err: p,
+    let mut full = StreamMsg {
+        counter: Counter(255),
+        evaluated: 0xFF,
+        unjudgeable: 0xA5,
+        ..StreamMsg::default()
+    };
+    for e in 0..MAX_EVENTS {
+        full.levels[e] = LevelState::ALL[e % 3];
+        full.confidences[e] = conf([32768, 0, 1, 32767][e % 4]);
+    }
+    v.extend([Message::Stream(full), Message::Stream(StreamMsg::default())]);
+    for e in 0..MAX_EVENTS as u8 {
+        v.push(Message::StreamPage(StreamPageMsg {
+            counter: Counter(e),
+            sample: 255 - e,
+            event: EventId(e),
+            unjudgeable: e % 2 == 1,
+            level: LevelState::ALL[usize::from(e) % 3],
+            confidence: conf([32768, 0, 1][usize::from(e) % 3]),
         }));
     }
-    for page in 0..3u8 {
-        let full = if page == 2 { 0b011 } else { 0b111 };
-        let last = if page == 2 { 0 } else { 32767 };
-        v.push(Message::Confidence(ConfidenceMsg {
-            seq: 255,
+    let status = |c: u8, page| {
+        Message::Status(StatusMsg {
+            counter: Counter(c),
             page,
-            evaluated: full,
-            unjudgeable: full,
-            confidences: [conf(32768), conf(1), conf(last)],
-        }));
-        v.push(Message::Confidence(ConfidenceMsg {
-            seq: 0,
-            page,
-            evaluated: 0b001,
-            unjudgeable: 0,
-            confidences: [conf(0), conf(0), conf(0)],
-        }));
-    }
+        })
+    };
     for reset in ResetReason::ALL {
-        v.push(Message::Status(StatusPage::Health {
-            reset,
-            faults: FaultFlags(1 << (reset as u8 % 8)),
-            uptime: u32::from(reset as u8) * 1_000_003,
-            phase: Some(reset as u8 % 8),
-            phase_seq: reset as u8,
-        }));
+        v.push(status(
+            reset as u8,
+            StatusPage::Health {
+                reset,
+                phase: Some(reset as u8 % 8),
+                faults: FaultFlags(1 << (reset as u8 % 9)),
+                phase_seq: reset as u8,
+            },
+        ));
     }
-    v.push(Message::Status(StatusPage::Health {
-        reset: ResetReason::Unknown,
-        faults: FaultFlags(0xFF),
-        uptime: u32::MAX,
-        phase: None,
-        phase_seq: 255,
-    }));
+    v.push(status(
+        255,
+        StatusPage::Health {
+            reset: ResetReason::Unknown,
+            phase: None,
+            faults: FaultFlags(0x1FF),
+            phase_seq: 255,
+        },
+    ));
     for x in [0u16, u16::MAX] {
         v.extend([
-            Message::Status(StatusPage::Timing {
-                overruns: x,
-                worst_tick: x,
-                tick_rate_hz: x,
-                protocol: x as u8,
-            }),
-            Message::Status(StatusPage::Link {
-                stale_episodes: x,
-                lost_frames: x,
-                bus_errors: x,
-            }),
-            Message::Status(StatusPage::FrameRejects {
-                wrong_length: x,
-                unknown_id: x,
-                bad_crc: x,
-            }),
-            Message::Status(StatusPage::ContentRejects {
-                sequence: x,
-                phase_not_configured: x,
-                out_of_range: x,
-            }),
-            Message::Status(StatusPage::Config {
-                checksum: u32::from(x) * 65537,
-                tx_dropped: x,
-            }),
+            status(
+                1,
+                StatusPage::Uptime {
+                    uptime: u32::from(x) * 65537,
+                },
+            ),
+            status(
+                2,
+                StatusPage::Identity {
+                    tick_rate_hz: x,
+                    protocol: x as u8,
+                    format: if x == 0 {
+                        BusFormat::Fd
+                    } else {
+                        BusFormat::Classic
+                    },
+                    node_source: if x == 0 {
+                        NodeIdSource::Straps
+                    } else {
+                        NodeIdSource::Store
+                    },
+                },
+            ),
+            status(
+                3,
+                StatusPage::Lateness {
+                    worst: x,
+                    late_ticks: x,
+                },
+            ),
+            status(
+                4,
+                StatusPage::Compute {
+                    worst_tick: x,
+                    lost_scans: x,
+                },
+            ),
+            status(
+                5,
+                StatusPage::Link {
+                    stale_episodes: x,
+                    lost_frames: x,
+                },
+            ),
+            status(
+                6,
+                StatusPage::Bus {
+                    bus_errors: x,
+                    tx_dropped: x,
+                },
+            ),
+            status(
+                7,
+                StatusPage::RejectsFrame {
+                    wrong_length: x,
+                    bad_crc: x,
+                },
+            ),
+            status(
+                8,
+                StatusPage::RejectsContent {
+                    sequence: x,
+                    out_of_range: x,
+                },
+            ),
+            status(
+                9,
+                StatusPage::RejectsRoute {
+                    unknown_id: x,
+                    phase_not_configured: x,
+                },
+            ),
+            status(
+                10,
+                StatusPage::Config {
+                    checksum: u32::from(x) * 65537,
+                },
+            ),
         ]);
     }
-    v.push(Message::Status(StatusPage::Timing {
-        overruns: 1,
-        worst_tick: 1234,
-        tick_rate_hz: 5000,
-        protocol: fingertip_can::PROTOCOL_VERSION,
-    }));
     v
 }
 
-/// Each sample on three nodes in turn, plus one sample of each kind on every node, so every
-/// message of the database is exercised.
-fn cases() -> Vec<(NodeId, Message, CanFrame)> {
-    let samples = samples();
+/// Broadcast context frames: full, partly filled, empty, at the ends of every range.
+fn context_samples() -> Vec<Message> {
+    let full = ContextMsg {
+        counter: Counter(255),
+        time_us: u32::MAX,
+        slots: [
+            Some(slot(4095, 32767)),
+            Some(slot(-4095, -32767)),
+            Some(slot(1, -1)),
+            Some(slot(0, 0)),
+            Some(slot(1234, 5678)),
+        ],
+    };
+    let mut some = full;
+    some.counter = Counter(0);
+    some.time_us = 0;
+    some.slots[1] = None;
+    some.slots[4] = None;
+    vec![
+        Message::Context(full),
+        Message::Context(some),
+        Message::Context(ContextMsg::default()),
+    ]
+}
+
+/// Every sample at several addresses, and one sample of each kind at every address, so
+/// every message of both databases is exercised.
+fn cases() -> Vec<(Address, Message, CanFrame)> {
     let mut out = Vec::new();
+    let samples = node_samples();
     for (i, m) in samples.iter().enumerate() {
-        for n in [0u8, 7, 15] {
-            let node = NodeId::new((n + i as u8) % 16).unwrap();
-            out.push((node, *m, m.encode(node).expect("sample encodes")));
+        for n in [0u8, 7, 14] {
+            let a = Address::Node(NodeId::new((n + i as u8) % 15).unwrap());
+            out.push((a, *m, m.encode(a).expect("sample encodes")));
         }
     }
-    for kind in MessageKind::ALL {
+    for kind in MessageKind::ALL.iter().filter(|k| !k.is_broadcast()) {
         let m = samples
             .iter()
-            .find(|m| m.kind() == kind)
+            .find(|m| m.kind() == *kind)
             .expect("kind sampled");
-        for n in 0..16 {
-            let node = NodeId::new(n).unwrap();
-            out.push((node, *m, m.encode(node).unwrap()));
+        for n in NodeId::all() {
+            out.push((Address::Node(n), *m, m.encode(Address::Node(n)).unwrap()));
+        }
+    }
+    for m in context_samples() {
+        for g in ContextGroup::all() {
+            out.push((Address::Group(g), m, m.encode(Address::Group(g)).unwrap()));
         }
     }
     out
@@ -241,10 +325,9 @@ fn hex(d: &[u8]) -> String {
     d.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-fn signal_map(m: &Message, f: &CanFrame) -> BTreeMap<String, f64> {
-    dbc::signal_values(m, f.data().first().copied().unwrap_or(0))
-        .into_iter()
-        .collect()
+fn signal_map(a: Address, m: &Message, f: &CanFrame) -> BTreeMap<String, f64> {
+    let crc = u16::from_le_bytes([f.data()[0], f.data()[1]]);
+    dbc::signal_values(a, m, crc).into_iter().collect()
 }
 
 fn same(a: f64, b: f64) -> bool {
@@ -252,97 +335,108 @@ fn same(a: f64, b: f64) -> bool {
 }
 
 #[test]
-fn committed_dbc_is_the_rendered_specification() {
-    let text = dbc::render();
-    if std::env::var("FINGERTIP_BLESS").as_deref() == Ok("1") {
-        std::fs::write(dbc_path(), &text).expect("write the DBC");
+fn committed_dbcs_are_the_rendered_specification() {
+    for format in FORMATS {
+        let text = dbc::render(format);
+        if std::env::var("FINGERTIP_BLESS").as_deref() == Ok("1") {
+            std::fs::write(dbc_path(format), &text).expect("write the DBC");
+        }
+        let committed = std::fs::read_to_string(dbc_path(format)).expect("the DBC exists");
+        assert!(
+            committed == text,
+            "{} differs from can_tools::dbc::render(); regenerate with FINGERTIP_BLESS=1 cargo test -p fingertip --test can_dbc",
+            dbc::file_name(format)
+        );
     }
-    let committed =
-        std::fs::read_to_string(dbc_path()).expect("fingertip-can/fingertip.dbc exists");
-    assert!(
-        committed == text,
-        "fingertip-can/fingertip.dbc differs from can_tools::dbc::render(); regenerate with FINGERTIP_BLESS=1 cargo test -p fingertip --test can_dbc"
-    );
 }
 
 #[test]
 fn codec_and_cantools_agree_both_ways() {
     let Some(py) = python() else { return };
-    let cases = cases();
-    let request = json!({
-        "dbc": dbc_path(),
-        "decode": cases.iter().map(|(_, _, f)| json!({
-            "id": f.id().as_raw(), "data": hex(f.data())
-        })).collect::<Vec<_>>(),
-        "encode": cases.iter().map(|(_, m, f)| json!({
-            "id": f.id().as_raw(), "signals": signal_map(m, f)
-        })).collect::<Vec<_>>(),
-    });
-    let answer = run_python(&py, &request);
-    let decoded = answer["decoded"].as_array().expect("decoded");
-    let encoded = answer["encoded"].as_array().expect("encoded");
-    assert_eq!(decoded.len(), cases.len());
-    assert_eq!(encoded.len(), cases.len());
-    let mut names = std::collections::BTreeSet::new();
-    for ((node, m, f), (dec, enc)) in cases.iter().zip(decoded.iter().zip(encoded)) {
-        let what = format!("{m:?} on node {}", node.get());
-        // Our frame, cantools' decoding.
-        assert!(dec.get("error").is_none(), "{what}: {dec}");
-        assert_eq!(
-            dec["name"].as_str(),
-            Some(dbc::message_name(m.kind(), *node).as_str()),
-            "{what}"
-        );
-        names.insert(dec["name"].as_str().unwrap_or("").to_string());
-        let theirs: BTreeMap<String, f64> = dec["signals"]
-            .as_object()
-            .expect("signals")
-            .iter()
-            .map(|(k, v)| (k.clone(), v.as_f64().expect("number")))
+    for format in FORMATS {
+        let cases: Vec<_> = cases()
+            .into_iter()
+            .filter(|(_, m, _)| m.kind().carried_by(format))
             .collect();
-        let ours = signal_map(m, f);
-        assert_eq!(
-            theirs.keys().collect::<Vec<_>>(),
-            ours.keys().collect::<Vec<_>>(),
-            "{what}: signal sets differ"
-        );
-        for (k, v) in &ours {
-            assert!(
-                same(theirs[k], *v),
-                "{what}: {k} = {} by cantools, {v} by us",
-                theirs[k]
+        let request = json!({
+            "dbc": dbc_path(format),
+            "decode": cases.iter().map(|(_, _, f)| json!({
+                "id": f.id().as_raw(), "data": hex(f.data())
+            })).collect::<Vec<_>>(),
+            "encode": cases.iter().map(|(a, m, f)| json!({
+                "id": f.id().as_raw(), "signals": signal_map(*a, m, f)
+            })).collect::<Vec<_>>(),
+        });
+        let answer = run_python(&py, &request);
+        let decoded = answer["decoded"].as_array().expect("decoded");
+        let encoded = answer["encoded"].as_array().expect("encoded");
+        assert_eq!(decoded.len(), cases.len());
+        assert_eq!(encoded.len(), cases.len());
+        let mut names = std::collections::BTreeSet::new();
+        for ((a, m, f), (dec, enc)) in cases.iter().zip(decoded.iter().zip(encoded)) {
+            let what = format!("{m:?} at {a:?} on {}", format.name());
+            // Our frame, cantools' decoding.
+            assert!(dec.get("error").is_none(), "{what}: {dec}");
+            assert_eq!(
+                dec["name"].as_str(),
+                Some(dbc::message_name(m.kind(), *a).as_str()),
+                "{what}"
             );
-        }
-        if m.kind().is_protected() {
+            names.insert(dec["name"].as_str().unwrap_or("").to_string());
+            let theirs: BTreeMap<String, f64> = dec["signals"]
+                .as_object()
+                .expect("signals")
+                .iter()
+                .map(|(k, v)| (k.clone(), v.as_f64().expect("number")))
+                .collect();
+            let ours = signal_map(*a, m, f);
+            assert_eq!(
+                theirs.keys().collect::<Vec<_>>(),
+                ours.keys().collect::<Vec<_>>(),
+                "{what}: signal sets differ"
+            );
+            for (k, v) in &ours {
+                assert!(
+                    same(theirs[k], *v),
+                    "{what}: {k} = {} by cantools, {v} by us",
+                    theirs[k]
+                );
+            }
             assert_eq!(
                 dec["crc_ok"],
                 json!(true),
                 "{what}: cantools' E2E check fails our CRC"
             );
-        } else {
-            assert!(dec["crc_ok"].is_null());
+            // cantools' frame, our decoding.
+            assert!(
+                enc.get("error").is_none(),
+                "{what}: cantools refused to encode: {enc}"
+            );
+            let text = enc["data"].as_str().unwrap();
+            let data: Vec<u8> = (0..text.len() / 2)
+                .map(|i| u8::from_str_radix(&text[2 * i..2 * i + 2], 16).unwrap())
+                .collect();
+            assert_eq!(data, f.data(), "{what}: cantools' bytes differ from ours");
+            assert_eq!(
+                Message::decode(Id::Standard(f.id()), &data),
+                Ok((*a, *m)),
+                "{what}"
+            );
         }
-        // cantools' frame, our decoding.
-        assert!(
-            enc.get("error").is_none(),
-            "{what}: cantools refused to encode: {enc}"
+        // Every message of the database was exercised.
+        assert_eq!(
+            names.len(),
+            dbc::messages(format).len(),
+            "{}",
+            format.name()
         );
-        let data: Vec<u8> = (0..enc["data"].as_str().unwrap().len() / 2)
-            .map(|i| {
-                u8::from_str_radix(&enc["data"].as_str().unwrap()[2 * i..2 * i + 2], 16).unwrap()
-            })
-            .collect();
-        assert_eq!(data, f.data(), "{what}: cantools' bytes differ from ours");
-        let back = Message::decode(Id::Standard(f.id()), &data);
-        assert_eq!(back, Ok((*node, *m)), "{what}");
+        eprintln!(
+            "{}: {} frames checked both ways against cantools, {} messages",
+            format.name(),
+            cases.len(),
+            names.len()
+        );
     }
-    // Every message of the database was exercised.
-    assert_eq!(names.len(), 6 * 16);
-    eprintln!(
-        "{} frames checked both ways against cantools, {} messages",
-        cases.len(),
-        names.len()
-    );
 }
 
 #[test]
@@ -350,145 +444,192 @@ fn values_outside_the_ranges_are_refused_by_both() {
     let Some(py) = python() else { return };
     let node = NodeId::new(3).unwrap();
     let id = |k: MessageKind| k.raw_id(node);
-    // (message, signals with one value out of range, our codec's raw counterpart)
-    let context = |x: f64| json!({"Crc": 0, "Counter": 1, "VelDesX": x, "VelDesY": 0, "AccDesX": 0, "AccDesY": 0});
-    let invalid = vec![
-        (id(MessageKind::Context), context(-0.4096)),
-        (id(MessageKind::Context), context(0.4096)),
+    let header = |extra: Value| {
+        let mut v = json!({"Crc": 0, "Counter": 1});
+        v.as_object_mut()
+            .unwrap()
+            .extend(extra.as_object().unwrap().clone());
+        v
+    };
+    let part = |p: u8, x: f64| {
+        let names = ContextPart::ALL[usize::from(p)].signal_names();
+        header(json!({"Part": p, names[0]: x, names[1]: 0}))
+    };
+    let context = |name: &str, x: f64| {
+        let mut v = json!({"Time": 0});
+        for n in 0..5 {
+            let o = v.as_object_mut().unwrap();
+            o.insert(format!("Valid_{n}"), json!(1));
+            for s in [
+                "VelDesX", "VelDesY", "AccDesX", "AccDesY", "PosErrX", "PosErrY",
+            ] {
+                o.insert(format!("{s}_{n}"), json!(0));
+            }
+        }
+        v[name] = json!(x);
+        header(v)
+    };
+    let stream = |name: &str, x: f64| {
+        let mut v = json!({});
+        for e in 0..MAX_EVENTS {
+            let o = v.as_object_mut().unwrap();
+            for s in ["Evaluated", "Unjudgeable", "Level", "Conf"] {
+                o.insert(format!("{s}{e}"), json!(0));
+            }
+        }
+        v[name] = json!(x);
+        header(v)
+    };
+    let health = |name: &str, x: f64| {
+        let mut v = json!({"Page": 0, "ResetReason": 0, "Phase": 0, "PhaseSeq": 0});
+        for f in FaultFlags::NAMES {
+            v[f] = json!(0);
+        }
+        v[name] = json!(x);
+        header(v)
+    };
+    let fd = vec![
         (
-            id(MessageKind::Context),
-            json!({"Crc": 0, "Counter": 1, "VelDesX": 0, "VelDesY": 0, "AccDesX": 8.192, "AccDesY": 0}),
+            MessageKind::Context.raw_id(node),
+            context("VelDesX_2", -0.4096),
         ),
         (
-            id(MessageKind::TipState),
-            json!({"Crc": 0, "Counter": 1, "PosErrX": -0.032768, "PosErrY": 0}),
+            MessageKind::Context.raw_id(node),
+            context("AccDesY_4", 8.192),
         ),
+        (
+            MessageKind::Context.raw_id(node),
+            context("PosErrX_0", 0.032768),
+        ),
+        (id(MessageKind::Stream), stream("Level3", 3.0)),
+        (id(MessageKind::Stream), stream("Conf7", 1.0000305)),
         (
             id(MessageKind::Phase),
-            json!({"Crc": 0, "Counter": 1, "PhaseId": 8, "PhaseSeq": 0}),
+            header(json!({"PhaseId": 8, "PhaseSeq": 0})),
         ),
         (
             id(MessageKind::Event),
-            json!({"Crc": 0, "Counter": 1, "EventId": 0, "Level": 0, "Confidence": 1.0000305, "Tick": 0, "OnsetAge": 0}),
+            header(json!({"EventId": 8, "Level": 0, "Tick": 0, "OnsetAge": 0})),
         ),
-        (id(MessageKind::Confidence), json!({"Seq": 0, "Page": 3})),
+        (id(MessageKind::Status), health("ResetReason", 9.0)),
+        (id(MessageKind::Status), header(json!({"Page": 11}))),
         (
             id(MessageKind::Status),
-            json!({"Page": 0, "ResetReason": 9, "FaultContextStale": 0, "FaultTipStateStale": 0, "FaultPhaseStale": 0, "FaultOverrun": 0, "FaultBusError": 0, "FaultTxDropped": 0, "FaultConfigFallback": 0, "FaultSensor": 0, "Uptime": 0, "Phase": 0, "PhaseSeq": 0}),
+            header(
+                json!({"Page": 2, "TickRate": 0, "ProtocolVersion": 2, "BusFormat": 0, "NodeIdSource": 2}),
+            ),
         ),
-        (id(MessageKind::Status), json!({"Page": 6})),
     ];
-    let request = json!({
-        "dbc": dbc_path(),
-        "encode_invalid": invalid.iter().map(|(id, s)| json!({"id": id, "signals": s})).collect::<Vec<_>>(),
-    });
-    let answer = run_python(&py, &request);
-    for ((id, s), res) in invalid
-        .iter()
-        .zip(answer["encode_invalid"].as_array().unwrap())
-    {
-        assert!(
-            res.get("error").is_some(),
-            "cantools encoded out-of-range values for 0x{id:03X} {s}: {res}"
-        );
+    let classic = vec![
+        (id(MessageKind::ContextPart), part(0, 0.4096)),
+        (id(MessageKind::ContextPart), part(2, -0.032768)),
+        (id(MessageKind::ContextPart), header(json!({"Part": 3}))),
+        (
+            id(MessageKind::StreamPage),
+            header(json!({"Sample": 0, "EventId": 2, "Unjudgeable2": 0, "Level2": 3, "Conf2": 0})),
+        ),
+    ];
+    for (format, invalid) in [(BusFormat::Fd, fd), (BusFormat::Classic, classic)] {
+        let request = json!({
+            "dbc": dbc_path(format),
+            "encode_invalid": invalid.iter().map(|(id, s)| json!({"id": id, "signals": s})).collect::<Vec<_>>(),
+        });
+        let answer = run_python(&py, &request);
+        for ((id, s), res) in invalid
+            .iter()
+            .zip(answer["encode_invalid"].as_array().unwrap())
+        {
+            assert!(
+                res.get("error").is_some(),
+                "cantools encoded out-of-range values for 0x{id:03X} {s}: {res}"
+            );
+        }
     }
     // Our codec refuses the same values.
-    assert!(
-        ContextMsg {
-            counter: c(1),
-            vel_des: [-4096, 0],
-            acc_des: [0, 0]
-        }
-        .encode(node)
-        .is_err()
-    );
-    assert!(
-        TipStateMsg {
-            counter: c(1),
-            pos_err: [-32768, 0]
-        }
-        .encode(node)
-        .is_err()
-    );
-    assert!(
-        PhaseMsg {
-            counter: c(1),
-            phase: 8,
-            sequence: 0
-        }
-        .encode(node)
-        .is_err()
-    );
+    let mut ctx = ContextMsg::default();
+    ctx.slots[2] = Some(ContextSlot {
+        vel_des: [-4096, 0],
+        ..ContextSlot::default()
+    });
+    assert!(ctx.encode(ContextGroup::of(node)).is_err());
+    let bad_part = ContextPartMsg {
+        counter: Counter(1),
+        part: ContextPart::PositionError,
+        value: [-32768, 0],
+    };
+    assert!(bad_part.encode(node).is_err());
+    let bad_phase = PhaseMsg {
+        counter: Counter(1),
+        phase: 8,
+        sequence: 0,
+    };
+    assert!(bad_phase.encode(node).is_err());
     assert!(Confidence::from_bits(32769).is_none());
     assert!(ResetReason::from_raw(9).is_none());
-    let status_page6 = [6u8, 0, 0, 0, 0, 0, 0, 0];
-    assert!(Message::decode(Id::Standard(MessageKind::Status.id(node)), &status_page6).is_err());
-    let stream_page3 = [0u8, 3, 0, 0, 0, 0, 0, 0];
-    assert!(
-        Message::decode(
-            Id::Standard(MessageKind::Confidence.id(node)),
-            &stream_page3
-        )
-        .is_err()
-    );
 }
 
 #[test]
-fn cantools_reads_the_database_as_specified() {
+fn cantools_reads_the_databases_as_specified() {
     let Some(py) = python() else { return };
-    let answer = run_python(&py, &json!({"dbc": dbc_path()}));
-    let messages = answer["messages"].as_array().expect("messages");
-    assert_eq!(messages.len(), 6 * 16);
-    let defs = dbc::messages();
-    for msg in messages {
-        let raw = msg["id"].as_u64().expect("id") as u16;
-        let (kind, node) = MessageKind::from_raw_id(raw).expect("an identifier of the protocol");
-        let def = defs
-            .iter()
-            .find(|d| d.kind == kind)
-            .expect("kind in the table");
-        let what = dbc::message_name(kind, node);
-        assert_eq!(msg["name"], json!(what));
-        assert_eq!(msg["length"], json!(kind.dlc()), "{what}");
-        assert_eq!(msg["extended"], json!(false), "{what}");
-        let sender = match kind.direction() {
-            fingertip_can::Direction::FromFingertip => format!("Fingertip{}", node.get()),
-            fingertip_can::Direction::ToFingertip => "Controller".to_string(),
-        };
-        assert_eq!(msg["senders"], json!([sender]), "{what}");
-        assert_eq!(msg["cycle_time"], json!(def.cycle_ms), "{what}");
-        let sigs = msg["signals"].as_array().expect("signals");
-        assert_eq!(sigs.len(), def.signals.len(), "{what}");
-        for d in &def.signals {
-            let w = format!("{what}.{}", d.name);
-            let s = sigs
+    for format in FORMATS {
+        let answer = run_python(&py, &json!({"dbc": dbc_path(format)}));
+        let messages = answer["messages"].as_array().expect("messages");
+        let defs = dbc::messages(format);
+        assert_eq!(messages.len(), defs.len());
+        for msg in messages {
+            let raw = msg["id"].as_u64().expect("id") as u16;
+            let (kind, address) =
+                MessageKind::from_raw_id(raw).expect("an identifier of the protocol");
+            let def = defs
                 .iter()
-                .find(|s| s["name"] == json!(d.name))
-                .unwrap_or_else(|| panic!("{w} missing"));
-            assert_eq!(s["start"], json!(d.start), "{w}");
-            assert_eq!(s["length"], json!(d.len), "{w}");
-            assert_eq!(s["byte_order"], json!("little_endian"), "{w}");
-            assert_eq!(s["signed"], json!(d.signed), "{w}");
-            assert!(same(s["scale"].as_f64().unwrap(), d.factor_value()), "{w}");
-            assert!(
-                same(s["minimum"].as_f64().unwrap(), d.min.parse().unwrap()),
-                "{w}"
-            );
-            assert!(
-                same(s["maximum"].as_f64().unwrap(), d.max.parse().unwrap()),
-                "{w}"
-            );
-            assert_eq!(s["unit"], json!(d.unit), "{w}");
-            match d.mux {
-                Mux::Always => {
-                    assert_eq!(s["is_multiplexer"], json!(false), "{w}");
-                    assert!(s["multiplexer_ids"].is_null(), "{w}");
+                .find(|d| d.raw_id() == raw)
+                .expect("identifier in the table");
+            let what = dbc::message_name(kind, address);
+            assert_eq!(msg["name"], json!(what));
+            assert_eq!(msg["length"], json!(kind.data_len()), "{what}");
+            assert_eq!(msg["extended"], json!(false), "{what}");
+            assert_eq!(msg["fd"], json!(format == BusFormat::Fd), "{what}");
+            let sender = match (kind.direction(), address) {
+                (fingertip_can::Direction::FromFingertip, Address::Node(n)) => {
+                    format!("Fingertip{}", n.get())
                 }
-                Mux::Selector => assert_eq!(s["is_multiplexer"], json!(true), "{w}"),
-                Mux::Page(p) => assert_eq!(s["multiplexer_ids"], json!([p]), "{w}"),
-            }
-            for (v, name) in &d.values {
-                assert_eq!(s["choices"][v.to_string()], json!(name), "{w}");
+                _ => "Controller".to_string(),
+            };
+            assert_eq!(msg["senders"], json!([sender]), "{what}");
+            assert_eq!(msg["cycle_time"], json!(def.cycle_ms), "{what}");
+            let sigs = msg["signals"].as_array().expect("signals");
+            assert_eq!(sigs.len(), def.signals.len(), "{what}");
+            for d in &def.signals {
+                let w = format!("{what}.{}", d.name);
+                let s = sigs
+                    .iter()
+                    .find(|s| s["name"] == json!(d.name))
+                    .unwrap_or_else(|| panic!("{w} missing"));
+                assert_eq!(s["start"], json!(d.start), "{w}");
+                assert_eq!(s["length"], json!(d.len), "{w}");
+                assert_eq!(s["byte_order"], json!("little_endian"), "{w}");
+                assert_eq!(s["signed"], json!(d.signed), "{w}");
+                assert!(same(s["scale"].as_f64().unwrap(), d.factor_value()), "{w}");
+                assert!(
+                    same(s["minimum"].as_f64().unwrap(), d.min.parse().unwrap()),
+                    "{w}"
+                );
+                assert!(
+                    same(s["maximum"].as_f64().unwrap(), d.max.parse().unwrap()),
+                    "{w}"
+                );
+                assert_eq!(s["unit"], json!(d.unit), "{w}");
+                match d.mux {
+                    Mux::Always => {
+                        assert_eq!(s["is_multiplexer"], json!(false), "{w}");
+                        assert!(s["multiplexer_ids"].is_null(), "{w}");
+                    }
+                    Mux::Selector => assert_eq!(s["is_multiplexer"], json!(true), "{w}"),
+                    Mux::Page(p) => assert_eq!(s["multiplexer_ids"], json!([p]), "{w}"),
+                }
+                for (v, name) in &d.values {
+                    assert_eq!(s["choices"][v.to_string()], json!(name), "{w}");
+                }
             }
         }
     }

@@ -1,13 +1,14 @@
 //! What the firmware is built with, and the detector it starts: the detector image made
 //! by `build.rs` from `configs/approach.toml` (built and validated on the PC at build
-//! time), the tick generated for it, its checksum, and the CAN node id; and [`start`],
-//! which puts the detector in service or, when it cannot run, the fallback.
+//! time), the tick generated for it, its checksum, and the bus format; and [`start`],
+//! which puts the detector in service or, when it cannot run, the fallback. The node id
+//! is not built in: the board finds it at boot ([`crate::node_id`]).
 
 use detector_core::{Detector, DetectorTick, ImageError};
-use fingertip_can::{NodeId, ResetReason, Transmitter};
+use fingertip_can::{BusFormat, NodeId, Transmitter};
 
 use crate::checksum::crc32;
-use crate::engine::{Engine, EngineParams, Fallback, FallbackReason, Service};
+use crate::engine::{BoardInfo, Engine, EngineParams, Fallback, FallbackReason, Service};
 
 mod consts {
     include!(concat!(env!("OUT_DIR"), "/build_consts.rs"));
@@ -20,10 +21,21 @@ pub use consts::{CONFIG_CHECKSUM, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MH
 /// it as the tick rate.
 pub const RATE_HZ: u32 = ((TRIGGER_RATE_MHZ + 500) / 1000) as u32;
 
-/// The fallback's heartbeat: the protocol's default period, in samples.
-const FALLBACK_TRANSMITTER: Transmitter = match Transmitter::with_defaults(NODE_ID, RATE_HZ) {
-    Ok(t) => t,
-    Err(_) => panic!("build.rs checks the rate"),
+/// The bus format: CAN FD, or classic CAN with the `classic-can` feature.
+pub const BUS_FORMAT: BusFormat = if cfg!(feature = "classic-can") {
+    BusFormat::Classic
+} else {
+    BusFormat::Fd
+};
+
+/// The fallback's heartbeat: the protocol's default period, in samples (for node 0; the
+/// board's node replaces it).
+const FALLBACK_TRANSMITTER: Transmitter = match NodeId::new(0) {
+    Some(n) => match Transmitter::with_defaults(n, BUS_FORMAT, RATE_HZ) {
+        Ok(t) => t,
+        Err(_) => panic!("build.rs checks the rate"),
+    },
+    None => panic!("node 0 exists"),
 };
 
 /// The built detector as an image (see `detector_core::image`), made by `build.rs`.
@@ -41,13 +53,6 @@ mod generated {
 /// ([`crate::engine::EngineError::TickImage`]).
 pub use generated::ApproachTick;
 
-/// The node id the firmware was built for (`FINGERTIP_NODE_ID` at build time, 0..=15,
-/// checked by `build.rs`).
-pub const NODE_ID: NodeId = match NodeId::new(consts::NODE_ID) {
-    Some(n) => n,
-    None => panic!("build.rs checks the node id"),
-};
-
 /// Loads `image` (on the board [`DETECTOR_IMAGE`]) into `detector` (typically a static
 /// made with [`Detector::empty`]), in place: the stack holds one event at a time, never a
 /// whole detector or configuration. An error cannot happen with the embedded image of a
@@ -59,8 +64,7 @@ pub fn load_detector(detector: &mut Detector, image: &[u8]) -> Result<(), ImageE
 }
 
 /// Puts the detector in service: loads `image` into `detector` (see [`load_detector`])
-/// and sets up the engine running `tick` for it, for this board ([`NODE_ID`]) after a
-/// reset for `reason`. Never fails: an image the loader rejects, or an engine that
+/// and sets up the engine running `tick` for it, for `board`. Never fails: an image the loader rejects, or an engine that
 /// cannot be set up (a generated tick whose image CRC-32 is not the loaded image's,
 /// which is how a corruption the loader cannot see shows), gives the
 /// [`Service::Fallback`] instead, which keeps the board on the bus reporting
@@ -69,9 +73,9 @@ pub fn start<'d, T: DetectorTick>(
     detector: &'d mut Detector,
     image: &[u8],
     tick: T,
-    reset: ResetReason,
+    board: BoardInfo,
 ) -> Service<'d, T> {
-    let params = EngineParams::new(NODE_ID, reset, crc32(image));
+    let params = EngineParams::new(board, crc32(image));
     let reason = match load_detector(detector, image) {
         Ok(()) => match Engine::new(detector, tick, params) {
             Ok(engine) => return Service::Running(engine),
@@ -80,7 +84,7 @@ pub fn start<'d, T: DetectorTick>(
         Err(e) => FallbackReason::Image(e),
     };
     Service::Fallback(
-        Fallback::new(FALLBACK_TRANSMITTER, &params, RATE_HZ),
+        Fallback::new(FALLBACK_TRANSMITTER.for_node(board.node), &params, RATE_HZ),
         reason,
     )
 }
@@ -93,7 +97,7 @@ mod tests {
     use crate::shared::Shared;
     use crate::supervise::Task;
 
-    use fingertip_can::{FaultFlags, Message, StatusPage};
+    use fingertip_can::{FaultFlags, Message, ResetReason, StatusPage};
 
     fn approach_config() -> detector_build::Config {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/approach.toml");
@@ -144,9 +148,16 @@ mod tests {
         assert_eq!((p.clocks, p.actual_mhz), (TRIGGER_CLOCKS, TRIGGER_RATE_MHZ));
     }
 
-    #[test]
-    fn the_node_id_is_in_range() {
-        assert!(NODE_ID.get() <= NodeId::MAX);
+    /// A board found at boot: node 6 from its straps, after a reset for `reset`, on the
+    /// bus format built in.
+    fn board(reset: ResetReason) -> BoardInfo {
+        BoardInfo {
+            node: NodeId::new(6).unwrap(),
+            node_source: fingertip_can::NodeIdSource::Straps,
+            format: BUS_FORMAT,
+            reset,
+            clock_fallback: false,
+        }
     }
 
     #[test]
@@ -173,8 +184,8 @@ mod tests {
                 &mut h.detector,
                 || 0,
                 |f| {
-                    sent.push(f);
-                    true
+                    sent.extend_from_slice(f);
+                    crate::txqueue::Pushed::default()
                 },
             );
             if t % 250 == 249 {
@@ -197,12 +208,17 @@ mod tests {
             messages.iter().all(|m| matches!(m, Message::Status(_))),
             "no event, no confidence: {messages:?}"
         );
-        let health: Vec<_> = messages
+        let pages: Vec<StatusPage> = messages
             .iter()
             .filter_map(|m| match m {
-                Message::Status(StatusPage::Health { faults, phase, .. }) => {
-                    Some((*faults, *phase))
-                }
+                Message::Status(s) => Some(s.page),
+                _ => None,
+            })
+            .collect();
+        let health: Vec<_> = pages
+            .iter()
+            .filter_map(|p| match p {
+                StatusPage::Health { faults, phase, .. } => Some((*faults, *phase)),
                 _ => None,
             })
             .collect();
@@ -213,29 +229,33 @@ mod tests {
                 .iter()
                 .all(|(f, p)| f.contains(FaultFlags::CONFIG_FALLBACK) && p.is_none())
         );
-        assert!(messages.contains(&Message::Status(StatusPage::Config {
-            checksum: image_crc,
-            tx_dropped: 0
-        })));
-        assert!(messages.iter().any(|m| matches!(
-            m,
-            Message::Status(StatusPage::Timing { tick_rate_hz, .. }) if u32::from(*tick_rate_hz) == RATE_HZ
+        assert!(pages.contains(&StatusPage::Config {
+            checksum: image_crc
+        }));
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity { tick_rate_hz, .. } if u32::from(*tick_rate_hz) == RATE_HZ
         )));
     }
 
     #[test]
     fn the_embedded_image_runs_and_reports_no_fallback() {
         let mut d = Box::new(Detector::empty());
-        let mut service = start(&mut d, DETECTOR_IMAGE, ApproachTick, ResetReason::PowerOn);
+        let mut service = start(
+            &mut d,
+            DETECTOR_IMAGE,
+            ApproachTick,
+            board(ResetReason::PowerOn),
+        );
         assert!(matches!(service, Service::Running(_)));
         assert_eq!(service.fallback_reason(), None);
         assert_eq!(service.rate_hz(), RATE_HZ);
         let (messages, checked_in) = run(&mut service);
         assert!(checked_in);
-        assert!(messages.iter().any(|m| matches!(m, Message::Confidence(_))));
+        assert!(messages.iter().any(|m| matches!(m, Message::Stream(_))));
         assert!(!messages.iter().any(|m| matches!(
             m,
-            Message::Status(StatusPage::Health { faults, .. }) if faults.contains(FaultFlags::CONFIG_FALLBACK)
+            Message::Status(s) if matches!(s.page, StatusPage::Health { faults, .. } if faults.contains(FaultFlags::CONFIG_FALLBACK))
         )));
     }
 
@@ -244,7 +264,7 @@ mod tests {
         let mut image = DETECTOR_IMAGE.to_vec();
         image[0] ^= 0xFF;
         let mut d = Box::new(Detector::empty());
-        let mut service = start(&mut d, &image, ApproachTick, ResetReason::PowerOn);
+        let mut service = start(&mut d, &image, ApproachTick, board(ResetReason::PowerOn));
         assert_eq!(
             service.fallback_reason(),
             Some(FallbackReason::Image(ImageError::Magic))
@@ -254,7 +274,7 @@ mod tests {
         // A truncated image too.
         let mut d = Box::new(Detector::empty());
         let short = &DETECTOR_IMAGE[..DETECTOR_IMAGE.len() / 2];
-        let mut service = start(&mut d, short, ApproachTick, ResetReason::Pin);
+        let mut service = start(&mut d, short, ApproachTick, board(ResetReason::Pin));
         assert!(matches!(
             service.fallback_reason(),
             Some(FallbackReason::Image(_))
@@ -269,7 +289,7 @@ mod tests {
         config.rate_hz = 2500.0;
         let other = detector_build::compile(&config).unwrap().image();
         let mut d = Box::new(Detector::empty());
-        let mut service = start(&mut d, &other, ApproachTick, ResetReason::PowerOn);
+        let mut service = start(&mut d, &other, ApproachTick, board(ResetReason::PowerOn));
         assert_eq!(
             service.fallback_reason(),
             Some(FallbackReason::Engine(EngineError::TickImage {
@@ -292,7 +312,7 @@ mod tests {
             })
             .expect("some byte of the image is a plain value");
         let mut d = Box::new(Detector::empty());
-        let mut service = start(&mut d, &image, ApproachTick, ResetReason::PowerOn);
+        let mut service = start(&mut d, &image, ApproachTick, board(ResetReason::PowerOn));
         assert!(
             matches!(
                 service.fallback_reason(),

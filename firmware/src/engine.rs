@@ -19,14 +19,15 @@
 
 use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
 use fingertip_can::{
-    CanFrame, FaultFlags, MessageKind, NodeId, Receiver, ResetReason, RxConfigError, Status,
-    Transmitter, TxConfigError, TxFrames, TxState,
+    BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
+    RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 use crate::channel_set::ChannelSet;
 use crate::sampling::AdcSample;
 use crate::shared::{DetectorHandle, RxShared};
-use crate::timing::{TickTiming, budget_cycles, cycles_to_tenths_us};
+use crate::timing::{Lateness, TickTiming, budget_cycles, cycles_to_tenths_us};
+use crate::txqueue::Pushed;
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
 /// Where the board's inputs go in the configuration's channel order: `None` for an
@@ -68,14 +69,47 @@ impl ChannelMap {
     }
 }
 
+/// What the board knows of itself at boot, reported in its status.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BoardInfo {
+    /// This fingertip's node id.
+    pub node: NodeId,
+    /// Where the node id came from ([`crate::node_id`]).
+    pub node_source: NodeIdSource,
+    /// The bus format the firmware was built for.
+    pub format: BusFormat,
+    /// Why the board last reset (reported in every heartbeat).
+    pub reset: ResetReason,
+    /// The crystal did not start: the board runs from its internal oscillator
+    /// ([`FaultFlags::CLOCK_FALLBACK`] in every heartbeat).
+    pub clock_fallback: bool,
+}
+
+impl BoardInfo {
+    /// The status a service starts from: the board's identity, its permanent faults.
+    fn status(&self, tick_rate_hz: u16, image_crc: u32, faults: FaultFlags) -> Status {
+        let mut status = Status {
+            reset: self.reset,
+            node_source: self.node_source,
+            faults,
+            tick_rate_hz,
+            config_checksum: image_crc,
+            ..Status::default()
+        };
+        status
+            .faults
+            .set(FaultFlags::CLOCK_FALLBACK, self.clock_fallback);
+        status
+    }
+}
+
 /// The engine's fixed parameters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct EngineParams {
-    /// This fingertip's node id.
-    pub node: NodeId,
-    /// Why the board last reset (reported in every heartbeat).
-    pub reset: ResetReason,
+    /// The board.
+    pub board: BoardInfo,
     /// The CRC-32 of the image the detector was loaded from
     /// ([`crate::checksum::crc32`]): reported in the heartbeat as the configuration's
     /// checksum, and what a generated tick must have been generated for.
@@ -89,10 +123,9 @@ pub struct EngineParams {
 impl EngineParams {
     /// Context stale after 20 ms (twenty missed frames at the controller's 1 kHz), phase
     /// after 100 ms.
-    pub const fn new(node: NodeId, reset: ResetReason, image_crc: u32) -> EngineParams {
+    pub const fn new(board: BoardInfo, image_crc: u32) -> EngineParams {
         EngineParams {
-            node,
-            reset,
+            board,
             image_crc,
             context_timeout_ms: 20,
             phase_timeout_ms: 100,
@@ -158,15 +191,19 @@ impl core::fmt::Display for FallbackReason {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct Health {
-    /// Ticks that overran their period since boot.
-    pub overruns: u32,
-    /// Longest tick so far, 0.1 µs.
+    /// Longest time from a sample's conversion to the end of its tick so far, 0.1 µs.
+    pub worst_lateness: u16,
+    /// Ticks that ended after their deadline since boot.
+    pub late_ticks: u32,
+    /// Longest tick computation so far, 0.1 µs.
     pub worst_tick: u16,
+    /// Scans lost since boot (overwritten before the detector read them).
+    pub lost_scans: u32,
     /// CAN error events since boot.
     pub bus_errors: u32,
-    /// Frames not sent since boot (queue full, mailbox replaced).
+    /// Frames not sent since boot (refused, pushed out, flushed after bus-off).
     pub tx_dropped: u32,
-    /// Flags latched and not yet reported (overrun, bus error, frame dropped).
+    /// Flags latched and not yet reported (late, bus error, frame dropped).
     pub latched: FaultFlags,
     /// The temperature sensor is faulty.
     pub sensor_fault: bool,
@@ -186,7 +223,7 @@ pub struct TickResult {
 
 /// The flags a heartbeat reports as "since the last heartbeat".
 pub const LATCHED_FLAGS: FaultFlags =
-    FaultFlags(FaultFlags::OVERRUN.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
+    FaultFlags(FaultFlags::LATE.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
 
 fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
     ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
@@ -200,12 +237,14 @@ fn is_status(frame: &CanFrame) -> bool {
 /// Copies the board's health into `status`: counters, the latched flags, the sensor
 /// fault (a faulty analog channel of `sample`, or the temperature sensor).
 fn report_health(status: &mut Status, health: &Health, sample: &AdcSample, tx_dropped: u32) {
-    status.overruns = health.overruns;
+    status.worst_lateness = health.worst_lateness;
+    status.late_ticks = health.late_ticks;
     status.worst_tick = health.worst_tick;
+    status.lost_scans = health.lost_scans;
     status.bus_errors = health.bus_errors;
     status.tx_dropped = health.tx_dropped.saturating_add(tx_dropped);
     for flag in [
-        FaultFlags::OVERRUN,
+        FaultFlags::LATE,
         FaultFlags::BUS_ERROR,
         FaultFlags::TX_DROPPED,
     ] {
@@ -256,21 +295,17 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         }
         let rate_hz = (rate + 0.5) as u32;
         let phases = u8::try_from(detector.phases().len()).unwrap_or(u8::MAX);
+        let board = params.board;
         let receiver = Receiver::new(
-            params.node,
+            board.node,
             phases,
             ms_to_ticks(params.context_timeout_ms, rate_hz),
             ms_to_ticks(params.phase_timeout_ms, rate_hz),
         )
         .map_err(EngineError::Receiver)?;
-        let transmitter =
-            Transmitter::with_defaults(params.node, rate_hz).map_err(EngineError::Transmitter)?;
-        let status = Status {
-            reset: params.reset,
-            tick_rate_hz: rate_hz as u16,
-            config_checksum: params.image_crc,
-            ..Status::default()
-        };
+        let transmitter = Transmitter::with_defaults(board.node, board.format, rate_hz)
+            .map_err(EngineError::Transmitter)?;
+        let status = board.status(rate_hz as u16, params.image_crc, FaultFlags(0));
         Ok(Engine {
             detector,
             state: detector.new_state(),
@@ -404,13 +439,11 @@ impl Fallback {
         Fallback {
             transmitter,
             tx: TxState::new(),
-            status: Status {
-                reset: params.reset,
-                faults: FaultFlags::CONFIG_FALLBACK,
-                tick_rate_hz: u16::try_from(rate_hz).unwrap_or(u16::MAX),
-                config_checksum: params.image_crc,
-                ..Status::default()
-            },
+            status: params.board.status(
+                u16::try_from(rate_hz).unwrap_or(u16::MAX),
+                params.image_crc,
+                FaultFlags::CONFIG_FALLBACK,
+            ),
         }
     }
 
@@ -497,74 +530,103 @@ impl<'d, T: DetectorTick> Service<'d, T> {
 }
 
 /// The detector task's bookkeeping around [`Service::tick`]: publishing the tick, timing
-/// it, counting overruns and refused frames, and clearing the latched flags a heartbeat
-/// reported (once its frames are queued). The board supplies the cycle counter and the
-/// frame queue.
+/// its computation and its lateness (from the sample's conversion to the end of the tick,
+/// frames queued and in the transmit buffers included), flagging late ticks, lost scans
+/// and frames not sent, and clearing the latched flags a heartbeat reported (once its
+/// frames are queued). The board supplies the cycle counter and the transmit path
+/// ([`crate::txqueue`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct TickRunner {
     timing: TickTiming,
+    lateness: Lateness,
     core_hz: u32,
     worst_tenths: u16,
-    queue_full: u32,
+    worst_late_tenths: u16,
+    lost_scans: u32,
+    /// Frames the transmit path had not sent (refused, pushed out, flushed) as of the
+    /// last tick.
+    tx_lost: u32,
 }
 
 impl TickRunner {
-    /// Bookkeeping for a detector at `rate_hz` on a core clocked at `core_hz`.
+    /// Bookkeeping for a detector at `rate_hz` on a core clocked at `core_hz`; a tick is
+    /// late when it ends more than one period after its sample's conversion.
     pub const fn new(core_hz: u32, rate_hz: u32) -> TickRunner {
+        let period = budget_cycles(core_hz, rate_hz);
         TickRunner {
-            timing: TickTiming::new(budget_cycles(core_hz, rate_hz)),
+            timing: TickTiming::new(period),
+            lateness: Lateness::new(period),
             core_hz,
             worst_tenths: 0,
-            queue_full: 0,
+            worst_late_tenths: 0,
+            lost_scans: 0,
+            tx_lost: 0,
         }
     }
 
-    /// One tick. `cycles` reads the free-running cycle counter (it may wrap); `send`
-    /// queues a frame for the CAN controller and returns `false` when the queue is full.
+    /// One tick on `sample` (its `converted_at` on the same cycle counter). `cycles` reads
+    /// the free-running cycle counter (it may wrap); `send` queues the tick's frames on the
+    /// transmit path and says what it did with them
+    /// ([`TxScheduler::push`](crate::txqueue::TxScheduler::push), then a pump).
     pub fn step<T: DetectorTick>(
         &mut self,
         service: &mut Service<'_, T>,
         sample: &AdcSample,
         shared: &mut DetectorHandle<'_>,
         cycles: impl Fn() -> u32,
-        mut send: impl FnMut(CanFrame) -> bool,
+        send: impl FnOnce(&[CanFrame]) -> Pushed,
     ) -> TickResult {
         // The receive task stamps frames with this tick: never newer than the tick being
         // judged (the receiver would read a negative age as stale).
         shared.set_now(sample.tick);
         let start = cycles();
         let counters = shared.counters();
+        let lost_scans = counters.lost_samples.get();
+        if lost_scans != self.lost_scans {
+            self.lost_scans = lost_scans;
+            shared.raise(FaultFlags::LATE);
+        }
         let health = Health {
-            overruns: self.timing.overruns(),
+            worst_lateness: self.worst_late_tenths,
+            late_ticks: self.lateness.late(),
             worst_tick: self.worst_tenths,
+            lost_scans,
             bus_errors: counters.bus_errors(),
-            tx_dropped: self.queue_full.saturating_add(counters.tx_lost.get()),
+            tx_dropped: self.tx_lost,
             latched: shared.latched(),
             sensor_fault: shared.sensor_fault(),
         };
         let result = service.tick(sample, shared.rx(), &health);
-        let mut status_refused = false;
-        for frame in result.frames.iter() {
-            if !send(*frame) {
-                self.queue_full = self.queue_full.saturating_add(1);
-                shared.raise(FaultFlags::TX_DROPPED);
-                status_refused |= is_status(frame);
-            }
+        let pushed = send(&result.frames);
+        // Frames refused now, or lost since (flushed after bus-off): flagged.
+        if pushed.lost != self.tx_lost {
+            self.tx_lost = pushed.lost;
+            shared.raise(FaultFlags::TX_DROPPED);
         }
         // A heartbeat the queue refused reported nothing: its flags wait for the next.
-        if result.heartbeat && !status_refused {
+        if result.heartbeat && !pushed.status_lost {
             shared.clear_reported(FaultFlags(health.latched.0 & LATCHED_FLAGS.0));
         }
-        let previous_worst = self.timing.worst();
-        if self.timing.record(cycles().wrapping_sub(start)) {
-            shared.raise(FaultFlags::OVERRUN);
+        let end = cycles();
+        let previous = (self.timing.worst(), self.lateness.worst());
+        self.timing.record(end.wrapping_sub(start));
+        if self.lateness.record(end.wrapping_sub(sample.converted_at)) {
+            shared.raise(FaultFlags::LATE);
         }
-        if self.timing.worst() != previous_worst {
+        if self.timing.worst() != previous.0 {
             self.worst_tenths = cycles_to_tenths_us(self.timing.worst(), self.core_hz);
+        }
+        if self.lateness.worst() != previous.1 {
+            self.worst_late_tenths = cycles_to_tenths_us(self.lateness.worst(), self.core_hz);
         }
         shared.check_in();
         result
+    }
+
+    /// The ticks' lateness so far.
+    pub const fn lateness(&self) -> &Lateness {
+        &self.lateness
     }
 
     /// The tick timing so far.
@@ -572,9 +634,10 @@ impl TickRunner {
         &self.timing
     }
 
-    /// Frames the queue refused since boot.
-    pub const fn queue_full(&self) -> u32 {
-        self.queue_full
+    /// Frames the transmit path had not sent as of the last tick (refused, pushed out,
+    /// flushed).
+    pub const fn tx_lost(&self) -> u32 {
+        self.tx_lost
     }
 }
 
@@ -586,7 +649,8 @@ mod tests {
     use crate::shared::Shared;
     use detector_core::{Level, Signal};
     use fingertip_can::{
-        ContextMsg, Counter, EventMsg, Message, PhaseMsg, StatusPage, TipStateMsg,
+        Address, ContextGroup, ContextMsg, ContextPart, ContextPartMsg, ContextSlot, Counter,
+        EventMsg, Message, PhaseMsg, StatusPage,
     };
 
     /// A small configuration of our own, so these tests check the plumbing whatever the
@@ -654,15 +718,26 @@ mod tests {
 
     /// The parameters of the board's engine: the embedded image's CRC.
     fn board_params() -> EngineParams {
-        EngineParams::new(node(), ResetReason::PowerOn, crc32(boot::DETECTOR_IMAGE))
+        EngineParams::new(board(), crc32(boot::DETECTOR_IMAGE))
     }
 
     fn node() -> NodeId {
         NodeId::new(3).unwrap()
     }
 
+    /// The board of these tests: node 3 from its straps, after a power-on reset.
+    fn board() -> BoardInfo {
+        BoardInfo {
+            node: node(),
+            node_source: NodeIdSource::Straps,
+            format: BusFormat::Fd,
+            reset: ResetReason::PowerOn,
+            clock_fallback: false,
+        }
+    }
+
     fn params() -> EngineParams {
-        EngineParams::new(node(), ResetReason::PowerOn, 0xDEAD_BEEF)
+        EngineParams::new(board(), 0xDEAD_BEEF)
     }
 
     /// An analog sample: force_x, force_y, skin_accel, stress_rate.
@@ -683,20 +758,29 @@ mod tests {
             .expect("accepted");
     }
 
-    fn context(counter: u8, vx: f64) -> CanFrame {
-        ContextMsg {
-            counter: Counter::new(counter).unwrap(),
+    /// The broadcast context frame of the node's group, sent at tick `now` (the
+    /// controller's clock in step), with the node's slot: velocity `vx` (m/s) and position
+    /// error `x` (m) along the normal.
+    fn context(now: Tick, counter: u8, vx: f64, x: f64) -> CanFrame {
+        let mut m = ContextMsg {
+            counter: Counter(counter),
+            time_us: now.wrapping_mul(200),
+            ..ContextMsg::default()
+        };
+        m.slots[ContextGroup::slot_of(node())] = Some(ContextSlot {
             vel_des: [(vx / 1e-4) as i16, 0],
             acc_des: [0, 0],
-        }
-        .encode(node())
-        .unwrap()
+            pos_err: [(x / 1e-6) as i16, 0],
+        });
+        m.encode(ContextGroup::of(node())).unwrap()
     }
 
-    fn tip_state(counter: u8, x: f64) -> CanFrame {
-        TipStateMsg {
-            counter: Counter::new(counter).unwrap(),
-            pos_err: [(x / 1e-6) as i16, 0],
+    /// A classic context part frame for the node.
+    fn part(counter: u8, part: ContextPart, value: [i16; 2]) -> CanFrame {
+        ContextPartMsg {
+            counter: Counter(counter),
+            part,
+            value,
         }
         .encode(node())
         .unwrap()
@@ -704,7 +788,7 @@ mod tests {
 
     fn phase(counter: u8, index: u8, sequence: u8) -> CanFrame {
         PhaseMsg {
-            counter: Counter::new(counter).unwrap(),
+            counter: Counter(counter),
             phase: index,
             sequence,
         }
@@ -717,8 +801,19 @@ mod tests {
             .iter()
             .map(|f| {
                 let (n, m) = Message::decode(f.id().into(), f.data()).expect("our frames decode");
-                assert_eq!(n, node());
+                assert_eq!(n, Address::Node(node()));
                 m
+            })
+            .collect()
+    }
+
+    /// The status pages among `frames`.
+    fn status_pages(frames: &TxFrames) -> Vec<StatusPage> {
+        decode(frames)
+            .into_iter()
+            .filter_map(|m| match m {
+                Message::Status(s) => Some(s.page),
+                _ => None,
             })
             .collect()
     }
@@ -733,10 +828,9 @@ mod tests {
             .collect()
     }
 
-    /// Fresh context (5 cm/s) and tip state (no error) at `now`.
+    /// Fresh context (5 cm/s, no position error) at `now`.
     fn fresh<T: DetectorTick>(shared: &RxShared, e: &Engine<'_, T>, now: Tick, counter: u8) {
-        deliver(shared, e, now, context(counter, 0.05));
-        deliver(shared, e, now, tip_state(counter, 0.0));
+        deliver(shared, e, now, context(now, counter, 0.05, 0.0));
     }
 
     #[test]
@@ -783,12 +877,10 @@ mod tests {
         assert!(r.output.decisions.is_empty(), "no event is invented");
         // The first tick sends the stream and the heartbeat at once.
         assert!(r.heartbeat);
-        let (reset, faults) = decode(&r.frames)
+        let (reset, faults) = status_pages(&r.frames)
             .iter()
-            .find_map(|m| match m {
-                Message::Status(StatusPage::Health { reset, faults, .. }) => {
-                    Some((*reset, *faults))
-                }
+            .find_map(|p| match p {
+                StatusPage::Health { reset, faults, .. } => Some((*reset, *faults)),
                 _ => None,
             })
             .expect("a health page");
@@ -867,7 +959,9 @@ mod tests {
         let d = detector();
         let mut e = engine(&d);
         let shared = RxShared::new();
-        deliver(&shared, &e, 0, context(0, 0.05));
+        // Classic CAN: velocity and acceleration came, the position error did not.
+        deliver(&shared, &e, 0, part(0, ContextPart::Velocity, [500, 0]));
+        deliver(&shared, &e, 0, part(1, ContextPart::Acceleration, [0, 0]));
         let r = e.tick(&sample(1, 0.0, 0.0), &shared, &Health::default());
         // bump reads pos_err_x in one of its two sensor terms.
         assert_eq!((r.output.unjudgeable, r.output.degraded), (0, BUMP));
@@ -927,49 +1021,96 @@ mod tests {
         let mut e = engine(&d);
         let shared = RxShared::new();
         let health = Health {
-            overruns: 3,
+            worst_lateness: 1_234,
+            late_ticks: 3,
             worst_tick: 2_345,
+            lost_scans: 7,
             bus_errors: 2,
             tx_dropped: 5,
-            latched: FaultFlags::OVERRUN | FaultFlags::TX_DROPPED,
+            latched: FaultFlags::LATE | FaultFlags::TX_DROPPED,
             sensor_fault: true,
         };
-        let (mut timing, mut faults, mut config, mut beats) = (None, None, None, 0);
-        // Pages 1..=5 come round once every five heartbeats (50 ms each).
-        for t in 0..(5 * 250 + 1) {
+        let (mut pages, mut faults, mut beats) = (Vec::new(), None, 0);
+        // Pages 1..=10 come round once every ten heartbeats (50 ms each).
+        for t in 0..(10 * 250 + 1) {
             let r = e.tick(&sample(t, 0.0, 0.0), &shared, &health);
             beats += usize::from(r.heartbeat);
-            for m in decode(&r.frames) {
-                match m {
-                    Message::Status(StatusPage::Health { faults: f, .. }) => faults = Some(f),
-                    Message::Status(p @ StatusPage::Timing { .. }) => timing = Some(p),
-                    Message::Status(p @ StatusPage::Config { .. }) => config = Some(p),
-                    _ => {}
+            for p in status_pages(&r.frames) {
+                match p {
+                    StatusPage::Health { faults: f, .. } => faults = Some(f),
+                    p => pages.push(p),
                 }
             }
         }
-        assert_eq!(beats, 6);
+        assert_eq!(beats, 11);
         let f = faults.unwrap();
-        assert!(
-            f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT)
-        );
+        assert!(f.contains(FaultFlags::LATE | FaultFlags::TX_DROPPED | FaultFlags::SENSOR_FAULT));
         assert!(!f.contains(FaultFlags::BUS_ERROR));
-        assert!(matches!(
-            timing,
-            Some(StatusPage::Timing {
-                overruns: 3,
+        for want in [
+            StatusPage::Lateness {
+                worst: 1_234,
+                late_ticks: 3,
+            },
+            StatusPage::Compute {
                 worst_tick: 2_345,
+                lost_scans: 7,
+            },
+            StatusPage::Bus {
+                bus_errors: 2,
+                tx_dropped: 5,
+            },
+            StatusPage::Config {
+                checksum: 0xDEAD_BEEF,
+            },
+        ] {
+            assert!(pages.contains(&want), "{want:?} not in {pages:?}");
+        }
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity {
                 tick_rate_hz: 5000,
                 ..
+            }
+        )));
+    }
+
+    #[test]
+    fn the_boards_identity_and_clock_fallback_are_in_every_heartbeat() {
+        let d = detector();
+        let fallback_clock = BoardInfo {
+            node_source: NodeIdSource::Store,
+            clock_fallback: true,
+            ..board()
+        };
+        let mut e = Engine::new(&d, d.clone(), EngineParams::new(fallback_clock, 1)).unwrap();
+        let mut pages = Vec::new();
+        for t in 0..=500 {
+            let r = e.tick(&sample(t, 0.0, 0.0), &RxShared::new(), &Health::default());
+            pages.extend(status_pages(&r.frames));
+        }
+        let health: Vec<FaultFlags> = pages
+            .iter()
+            .filter_map(|p| match p {
+                StatusPage::Health { faults, .. } => Some(*faults),
+                _ => None,
             })
-        ));
-        assert!(matches!(
-            config,
-            Some(StatusPage::Config {
-                checksum: 0xDEAD_BEEF,
-                tx_dropped: 5
-            })
-        ));
+            .collect();
+        assert_eq!(health.len(), 3);
+        assert!(
+            health
+                .iter()
+                .all(|f| f.contains(FaultFlags::CLOCK_FALLBACK))
+        );
+        assert!(pages.iter().any(|p| matches!(
+            p,
+            StatusPage::Identity {
+                node_source: NodeIdSource::Store,
+                format: BusFormat::Fd,
+                ..
+            }
+        )));
+        let plain = engine(&d);
+        assert!(!plain.status().faults.contains(FaultFlags::CLOCK_FALLBACK));
     }
 
     #[test]
@@ -985,7 +1126,7 @@ mod tests {
             let r = e.tick(&sample(t, 0.0, 0.0), &shared, &Health::default());
             if decode(&r.frames)
                 .iter()
-                .any(|m| matches!(m, Message::Confidence(_)))
+                .any(|m| matches!(m, Message::Stream(_)))
             {
                 stream_ticks.push(t);
             }
@@ -1015,7 +1156,7 @@ mod tests {
     fn a_tick_generated_for_another_detector_is_refused() {
         let d = detector();
         let crc = crc32(&detector_build::compile(&config()).unwrap().image());
-        let params = EngineParams::new(node(), ResetReason::PowerOn, crc);
+        let params = EngineParams::new(board(), crc);
         let tick = ApproachTick
             .image_crc()
             .expect("a generated tick knows its image");
@@ -1050,10 +1191,9 @@ mod tests {
                     (&rx_a, &interpreted.receiver()),
                     (&rx_b, &generated.receiver()),
                 ] {
-                    for f in [context(counter, 0.05), tip_state(counter, err)] {
-                        rx.with(|s| e.receive(s, now, f.id().into(), f.data()))
-                            .expect("accepted");
-                    }
+                    let f = context(k, counter, 0.05, err);
+                    rx.with(|s| e.receive(s, now, f.id().into(), f.data()))
+                        .expect("accepted");
                 }
             }
             let push = k % 500 >= 250;
@@ -1091,7 +1231,7 @@ mod tests {
     }
 
     #[test]
-    fn the_runner_times_ticks_counts_overruns_and_refused_frames() {
+    fn the_runner_times_ticks_measures_lateness_and_flags_refused_frames() {
         use crate::supervise::Task;
         use core::cell::Cell;
         let d = detector();
@@ -1100,81 +1240,134 @@ mod tests {
         let mut h = shared.split();
         let mut runner = TickRunner::new(170_000_000, 5000);
         // A cycle counter near its wrap that advances 40 000 cycles per read: every tick
-        // overruns its 34 000.
+        // computes longer than its 34 000, and ends 45 000 after its sample's conversion.
         let clock = Cell::new(u32::MAX - 10_000);
         let cycles = || {
             let now = clock.get();
             clock.set(now.wrapping_add(40_000));
             now
         };
+        let converted = |t: Tick| AdcSample {
+            converted_at: clock.get().wrapping_sub(5_000),
+            ..sample(t, 0.0, 0.0)
+        };
         // The first tick sends the stream and a heartbeat; the queue refuses everything.
-        let r = runner.step(
-            &mut e,
-            &sample(0, 0.0, 0.0),
-            &mut h.detector,
-            cycles,
-            |_| false,
-        );
+        let s0 = converted(0);
+        let r = runner.step(&mut e, &s0, &mut h.detector, cycles, |f| Pushed {
+            refused: f.len() as u32,
+            status_lost: true,
+            lost: f.len() as u32,
+        });
         assert!(r.heartbeat);
-        assert_eq!(runner.queue_full(), r.frames.len() as u32);
+        let refused = r.frames.len() as u32;
+        assert_eq!(runner.tx_lost(), refused);
+        assert_eq!(runner.timing().worst(), 40_000);
         assert_eq!(
-            (runner.timing().overruns(), runner.timing().worst()),
-            (1, 40_000)
+            (runner.lateness().worst(), runner.lateness().late()),
+            (45_000, 1)
         );
         // Latched after the heartbeat was built: reported by the next one.
         assert!(
             h.detector
                 .latched()
-                .contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED)
+                .contains(FaultFlags::LATE | FaultFlags::TX_DROPPED)
         );
         assert_eq!(h.can_rx.now(), 0);
         assert!(h.watchdog.round(Task::Detector as u8));
         let mut reported = None;
         for t in 1..=250 {
-            let r = runner.step(
-                &mut e,
-                &sample(t, 0.0, 0.0),
-                &mut h.detector,
-                cycles,
-                |_| true,
-            );
+            let st = converted(t);
+            let r = runner.step(&mut e, &st, &mut h.detector, cycles, |_| Pushed {
+                lost: refused,
+                ..Pushed::default()
+            });
             if r.heartbeat {
-                reported = decode(&r.frames).into_iter().find_map(|m| match m {
-                    Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
-                    _ => None,
-                });
+                reported = health_flags(&r.frames);
             }
         }
         let f = reported.expect("a heartbeat at tick 250");
-        assert!(f.contains(FaultFlags::OVERRUN | FaultFlags::TX_DROPPED));
-        // Every tick overran again, so OVERRUN is latched anew; TX_DROPPED was cleared.
-        assert!(h.detector.latched().contains(FaultFlags::OVERRUN));
+        assert!(f.contains(FaultFlags::LATE | FaultFlags::TX_DROPPED));
+        // Every tick was late again, so LATE is latched anew; TX_DROPPED was cleared.
+        assert!(h.detector.latched().contains(FaultFlags::LATE));
         assert!(!h.detector.latched().contains(FaultFlags::TX_DROPPED));
         assert_eq!(h.can_rx.now(), 250);
-        // 40 000 cycles at 170 MHz = 235.3 µs, reported from the second tick on.
-        assert_eq!(e.status().worst_tick, 2352);
-        assert_eq!(runner.timing().overruns(), 251);
+        // 40 000 cycles at 170 MHz = 235.2 µs, 45 000 = 264.7 µs, reported from the second
+        // tick on.
+        assert_eq!(
+            (e.status().worst_tick, e.status().worst_lateness),
+            (2352, 2647)
+        );
+        assert_eq!(
+            (runner.lateness().late(), e.status().late_ticks),
+            (251, 250)
+        );
+    }
+
+    #[test]
+    fn a_prompt_tick_is_not_late_but_lost_scans_are_flagged() {
+        let d = detector();
+        let mut e = Service::Running(engine(&d));
+        let mut shared = Shared::new();
+        let mut h = shared.split();
+        let mut runner = TickRunner::new(170_000_000, 5000);
+        // Ends 20 000 cycles (118 µs) after its sample's conversion: within the period.
+        let s = AdcSample {
+            converted_at: 1_000,
+            ..sample(0, 0.0, 0.0)
+        };
+        runner.step(&mut e, &s, &mut h.detector, || 21_000, |_| lost(0));
+        assert_eq!(
+            (runner.lateness().late(), runner.lateness().worst()),
+            (0, 20_000)
+        );
+        assert!(!h.detector.latched().contains(FaultFlags::LATE));
+        // The sampler lost two scans: flagged at the next tick, counted in the status.
+        h.sampler.set_lost_samples(2);
+        runner.step(
+            &mut e,
+            &AdcSample { tick: 3, ..s },
+            &mut h.detector,
+            || 21_000,
+            |_| lost(0),
+        );
+        assert!(h.detector.latched().contains(FaultFlags::LATE));
+        assert_eq!(e.status().lost_scans, 2);
     }
 
     /// The health page of the heartbeat among `frames`, if any.
     fn health_flags(frames: &TxFrames) -> Option<FaultFlags> {
-        decode(frames).into_iter().find_map(|m| match m {
-            Message::Status(StatusPage::Health { faults, .. }) => Some(faults),
+        status_pages(frames).into_iter().find_map(|p| match p {
+            StatusPage::Health { faults, .. } => Some(faults),
             _ => None,
         })
     }
 
-    /// Runs the ticks `ticks` with quiet samples and every frame sent; the health flags of
-    /// the heartbeats among them, in order.
+    /// A transmit path that takes every frame of the tick, having lost `lost` since boot.
+    fn lost(lost: u32) -> Pushed {
+        Pushed {
+            lost,
+            ..Pushed::default()
+        }
+    }
+
+    /// Runs the ticks `ticks` with quiet samples and every frame taken (`lost_before`
+    /// lost before); the health flags of the heartbeats among them, in order.
     fn quiet_heartbeats(
         runner: &mut TickRunner,
         service: &mut Service<'_, Detector>,
         handle: &mut DetectorHandle<'_>,
         ticks: core::ops::RangeInclusive<Tick>,
+        lost_before: u32,
     ) -> Vec<FaultFlags> {
         ticks
             .filter_map(|t| {
-                let r = runner.step(service, &sample(t, 0.0, 0.0), handle, || 0, |_| true);
+                let r = runner.step(
+                    service,
+                    &sample(t, 0.0, 0.0),
+                    handle,
+                    || 0,
+                    |_| lost(lost_before),
+                );
                 health_flags(&r.frames)
             })
             .collect()
@@ -1194,34 +1387,31 @@ mod tests {
             &sample(0, 0.0, 0.0),
             &mut h.detector,
             cycles,
-            |_| true,
+            |_| lost(0),
         );
-        // A frame lost before the next heartbeat (at tick 250) ...
-        h.can_tx.frame_lost();
+        // A frame lost before the next heartbeat (at tick 250; flushed after a bus-off,
+        // say) ...
         for t in 1..250 {
             runner.step(
                 &mut e,
                 &sample(t, 0.0, 0.0),
                 &mut h.detector,
                 cycles,
-                |_| true,
+                |_| lost(1),
             );
         }
-        // ... is reported by it; while that heartbeat is being queued, the transmit task
-        // loses another frame: the same flag, raised between the read and the clear.
+        // ... is reported by it; while that heartbeat is being queued, another frame is
+        // lost: the same flag, raised between the read and the clear.
         let r = runner.step(
             &mut e,
             &sample(250, 0.0, 0.0),
             &mut h.detector,
             cycles,
-            |_| {
-                h.can_tx.frame_lost();
-                true
-            },
+            |_| lost(2),
         );
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::TX_DROPPED)));
         // The next heartbeat reports the second loss, and the one after has nothing new.
-        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 251..=750);
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 251..=750, 2);
         assert_eq!(reported.len(), 2);
         assert!(reported[0].contains(FaultFlags::TX_DROPPED));
         assert!(!reported[1].contains(FaultFlags::TX_DROPPED));
@@ -1239,10 +1429,15 @@ mod tests {
         // The first tick's heartbeat reports the bus error, but the queue refuses the
         // status frames.
         let r = runner.step(&mut e, &sample(0, 0.0, 0.0), &mut h.detector, cycles, |f| {
-            !is_status(&f)
+            let refused = f.iter().filter(|f| is_status(f)).count() as u32;
+            Pushed {
+                refused,
+                status_lost: true,
+                lost: refused,
+            }
         });
         assert!(health_flags(&r.frames).is_some_and(|f| f.contains(FaultFlags::BUS_ERROR)));
-        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 1..=250);
+        let reported = quiet_heartbeats(&mut runner, &mut e, &mut h.detector, 1..=250, 2);
         // Reported again at the next heartbeat, with the refused frames' own flag.
         assert_eq!(reported.len(), 1);
         assert!(reported[0].contains(FaultFlags::BUS_ERROR | FaultFlags::TX_DROPPED));
@@ -1251,7 +1446,7 @@ mod tests {
 
     #[test]
     fn the_fallback_sends_heartbeats_only_with_its_flag_and_the_boards_faults() {
-        let transmitter = Transmitter::with_defaults(node(), 5000).unwrap();
+        let transmitter = Transmitter::with_defaults(node(), BusFormat::Fd, 5000).unwrap();
         let reason = FallbackReason::Image(ImageError::Magic);
         let mut service: Service<'_, Detector> =
             Service::Fallback(Fallback::new(transmitter, &params(), 5000), reason);
@@ -1268,44 +1463,45 @@ mod tests {
         let mut s = sample(0, -1.0, 50.0);
         s.faults = ChannelSet::from_bits(0b0100);
         let health = Health {
-            latched: FaultFlags::OVERRUN,
+            latched: FaultFlags::LATE,
             ..Health::default()
         };
-        let mut pages = Vec::new();
+        let mut messages = Vec::new();
         for t in 0..=500 {
             s.tick = t;
             let r = service.tick(&s, &shared, &health);
             assert_eq!(r.output, Output::default());
             assert_eq!(r.heartbeat, t % 250 == 0);
-            pages.extend(decode(&r.frames));
+            messages.extend(decode(&r.frames));
         }
         assert_eq!(
-            pages.len(),
+            messages.len(),
             6,
             "two status pages per heartbeat, nothing else"
         );
-        assert!(
-            pages.iter().all(|m| matches!(m, Message::Status(_))),
-            "{pages:?}"
-        );
+        let pages: Vec<StatusPage> = messages
+            .iter()
+            .map(|m| match m {
+                Message::Status(s) => s.page,
+                other => panic!("{other:?}"),
+            })
+            .collect();
         assert_eq!(
             pages[0],
-            Message::Status(StatusPage::Health {
+            StatusPage::Health {
                 reset: ResetReason::PowerOn,
-                faults: FaultFlags::CONFIG_FALLBACK
-                    | FaultFlags::OVERRUN
-                    | FaultFlags::SENSOR_FAULT,
-                uptime: 0,
                 phase: None,
+                faults: FaultFlags::CONFIG_FALLBACK | FaultFlags::LATE | FaultFlags::SENSOR_FAULT,
                 phase_seq: 0,
-            })
+            }
         );
+        assert_eq!(pages[1], StatusPage::Uptime { uptime: 0 });
         assert!(matches!(
-            pages[1],
-            Message::Status(StatusPage::Timing {
+            pages[3],
+            StatusPage::Identity {
                 tick_rate_hz: 5000,
                 ..
-            })
+            }
         ));
         assert_eq!(service.status().config_checksum, 0xDEAD_BEEF);
     }

@@ -1,15 +1,22 @@
 //! The board binary: clocks, peripherals and the embassy tasks around the lib.
 //!
-//! Tasks, each owning its peripheral and talking through the queues and its handle on
-//! the [`Shared`] state (what it writes, it owns):
-//! - `sampler_task`: TIM6 triggers an ADC1 scan every detector tick; the DMA ring buffer
-//!   delivers them a block at a time; calibrated samples go to the detector's queue;
-//! - `detector_task`: one [`Service::tick`] per sample (the engine, or the fallback when
-//!   the embedded detector cannot run), timed with the DWT cycle counter; its frames go
-//!   to the CAN transmit queue;
+//! Tasks, each owning its peripheral and talking through its handle on the [`Shared`]
+//! state (what it writes, it owns):
+//! - `detector_task`, on an interrupt executor above every other task: TIM6 triggers an
+//!   ADC1 scan every detector tick into a DMA ring of two scans; the DMA's interrupt
+//!   counts the scans from its position ([`ScanProgress`]) and wakes the task, which reads
+//!   the newest scan, calibrates it and runs one [`Service::tick`] on it (the engine, or
+//!   the fallback when the embedded detector cannot run); its frames go straight to the
+//!   transmit path ([`TxScheduler`]) and into the FDCAN's buffers; it measures each tick's
+//!   computation and lateness with the DWT cycle counter;
 //! - `temperature`: the TMP117 over I2C2, four times a second; publishes the temperature;
-//! - `can_rx`, `can_tx`, `can_supervisor`: FDCAN1 at 1 Mbit/s classic, bus-off recovery;
-//! - `watchdog_task`: refreshes the IWDG while the sampler and the detector are alive.
+//! - `can_rx`, `can_supervisor`: FDCAN1 (CAN FD at 1 and 5 Mbit/s), the receive path,
+//!   bus-off recovery and the flush of stale frames; the FDCAN's interrupt pumps the
+//!   transmit path as buffers free up;
+//! - `watchdog_task`: refreshes the IWDG while scans arrive and ticks complete.
+//!
+//! The CAN, temperature and watchdog tasks run on the thread executor, below the
+//! detector: none of them can hold a tick back.
 //!
 //! Everything worth testing lives in the lib; this file is wiring, and `regs` holds its
 //! raw register accesses.
@@ -21,64 +28,122 @@ mod regs;
 
 use core::num::{NonZeroU8, NonZeroU16};
 
+use core::cell::UnsafeCell;
 use cortex_m::peripheral::DWT;
-use cortex_m_rt::entry;
+use cortex_m::peripheral::SCB;
+use cortex_m_rt::{entry, exception};
 use defmt::{error, info, warn};
-use embassy_executor::{Executor, Spawner};
+
+use embassy_executor::{Executor, InterruptExecutor, Spawner};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
-use embassy_stm32::can::{self, CanConfigurator, CanRx, CanTx, Properties};
+use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
+use embassy_stm32::gpio::{Input, Pull};
 use embassy_stm32::i2c::{self, I2c, Master};
+use embassy_stm32::interrupt::{InterruptExt, Priority};
 use embassy_stm32::mode::Async;
 use embassy_stm32::peripherals::{ADC1, DMA1_CH1, DMA1_CH2, DMA1_CH3, FDCAN1, I2C2, IWDG, TIM6};
 use embassy_stm32::time::Hertz;
 use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
-use embassy_stm32::{bind_interrupts, dma};
-use embassy_sync::channel::Channel;
+use embassy_stm32::{bind_interrupts, dma, interrupt};
+use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
+use core::cell::RefCell;
 use detector_core::Detector;
-use fingertip_can::{CanFrame, Receiver, ResetReason};
+use detector_core::Tick;
+use fingertip_can::{BusFormat, Receiver};
 use firmware::boot::{self, ApproachTick};
-use firmware::engine::{Service, TickRunner};
-use firmware::sampling::{AdcSample, BLOCK_LEN, DMA_LEN, Sampler};
+use firmware::engine::{BoardInfo, Service, TickRunner};
+use firmware::node_id::{self, NodeIdError};
+use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
 use firmware::shared::{
-    BusHandle, CanRxHandle, CanTxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
+    BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
     TemperatureHandle, WatchdogHandle,
 };
 use firmware::supervise::{BusAction, BusSupervisor, Task};
 use firmware::timing::budget_cycles;
 use firmware::tmp117::{self, SensorHealth, Tmp117};
+use firmware::txqueue::TxScheduler;
 use firmware::wiring::CORE_CLOCK_HZ;
 use firmware::{calib, can_timing, reset};
 
 bind_interrupts!(struct Irqs {
-    DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>;
+    DMA1_CHANNEL1 => dma::InterruptHandler<DMA1_CH1>, ScanIrq;
     DMA1_CHANNEL2 => dma::InterruptHandler<DMA1_CH2>;
     DMA1_CHANNEL3 => dma::InterruptHandler<DMA1_CH3>;
     I2C2_EV => i2c::EventInterruptHandler<I2C2>;
     I2C2_ER => i2c::ErrorInterruptHandler<I2C2>;
-    FDCAN1_IT0 => can::IT0InterruptHandler<FDCAN1>;
+    FDCAN1_IT0 => can::IT0InterruptHandler<FDCAN1>, TxPump;
     FDCAN1_IT1 => can::IT1InterruptHandler<FDCAN1>;
 });
 
-/// Samples waiting for the detector: 16 ticks (3.2 ms at 5 kHz), three blocks of slack
-/// behind the one being processed.
-const SAMPLE_QUEUE: usize = 16;
-/// Frames waiting for the CAN controller: a whole tick's worst case, and then some.
-const TX_QUEUE: usize = 24;
+/// The DMA's circular buffer of two scans. Handed to the HAL once, which runs the DMA on
+/// it and never reads it (its `read` is never called); the detector task reads each scan
+/// from it with volatile loads while the DMA writes the other slot.
+struct DmaBuffer(UnsafeCell<[u16; DMA_LEN]>);
 
-static SAMPLES: Channel<RawMutex, AdcSample, SAMPLE_QUEUE> = Channel::new();
-static TX_FRAMES: Channel<RawMutex, CanFrame, TX_QUEUE> = Channel::new();
+// SAFETY: the DMA writes it and the detector task reads it, each in its own slot at a time
+// (`ScanPicker::torn` catches a read the DMA overtook); no reference to it is used after
+// the HAL takes it at boot.
+unsafe impl Sync for DmaBuffer {}
+
+static ADC_DMA: DmaBuffer = DmaBuffer(UnsafeCell::new([0; DMA_LEN]));
+
+/// The DMA's progress, counted in scans by its interrupt: the detector's tick numbers.
+static SCANS: ScanProgress = ScanProgress::new();
+/// Raised by the DMA's interrupt when a scan completes; the detector task waits on it.
+static SCAN_READY: Signal<RawMutex, ()> = Signal::new();
+
+/// Counts the scans from the DMA's position at each of its interrupts (bound after the
+/// HAL's handler, which acknowledges them), and wakes the detector.
+struct ScanIrq;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::DMA1_CHANNEL1> for ScanIrq {
+    unsafe fn on_interrupt() {
+        if SCANS.on_dma(regs::adc_dma_remaining(), DWT::cycle_count()) {
+            SCAN_READY.signal(());
+        }
+    }
+}
+
+/// The detector's executor, run from an interrupt the board does not otherwise use
+/// (UART4), at a priority below the DMA's and the FDCAN's interrupts and above every
+/// thread-mode task.
+static EXECUTOR_HIGH: InterruptExecutor = InterruptExecutor::new();
+/// Its priority.
+const DETECTOR_PRIORITY: Priority = Priority::P1;
+
+#[interrupt]
+unsafe fn UART4() {
+    // SAFETY: UART4's vector belongs to the executor alone (the board has no UART4).
+    unsafe { EXECUTOR_HIGH.on_interrupt() }
+}
+
+/// The transmit path: the detector task queues each tick's frames and fills the FDCAN's
+/// buffers, the FDCAN's interrupt refills them as they free up, the supervisor flushes it
+/// after bus-off. Held for the few microseconds of a push or a pump.
+static TX: Mutex<RawMutex, RefCell<TxScheduler>> = Mutex::new(RefCell::new(TxScheduler::new()));
+
+/// Pumps the transmit path from the FDCAN's interrupt (bound after the HAL's handler):
+/// a frame went out, or a cancellation finished.
+struct TxPump;
+
+impl interrupt::typelevel::Handler<interrupt::typelevel::FDCAN1_IT0> for TxPump {
+    unsafe fn on_interrupt() {
+        regs::clear_cancel_interrupt();
+        TX.lock(|t| t.borrow_mut().pump(&mut regs::FdcanTx));
+    }
+}
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
 static DETECTOR: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
 static SHARED: StaticCell<Shared> = StaticCell::new();
 static SERVICE: StaticCell<Service<'static, ApproachTick>> = StaticCell::new();
-static ADC_DMA: StaticCell<[u16; DMA_LEN]> = StaticCell::new();
 
 /// IWDG period: four missed 50 ms rounds of the watchdog task.
 const WATCHDOG_TIMEOUT_US: u32 = 200_000;
@@ -93,8 +158,10 @@ const I2C_TIMEOUT_MS: u32 = 5;
 const SENSOR_TRIP: u8 = 3;
 /// CAN error-state polling period.
 const CAN_SUPERVISOR_PERIOD: Duration = Duration::from_millis(2);
-/// The CAN bit rate.
+/// The CAN bit rate of the arbitration phase.
 const CAN_BITRATE: u32 = 1_000_000;
+/// The CAN FD data-phase bit rate (bit-rate switching).
+const CAN_DATA_BITRATE: u32 = 5_000_000;
 /// The FDCAN kernel clock: PLL Q, see [`clocks`].
 const CAN_CLOCK_HZ: u32 = 85_000_000;
 /// The bit timing: 85 quanta of one kernel clock, sample point at 87 % (CiA recommends
@@ -104,21 +171,36 @@ const CAN_TIMING: can_timing::BitTiming = match can_timing::nominal(CAN_CLOCK_HZ
     Ok(t) => t,
     Err(_) => panic!("the FDCAN clock cannot make the CAN bit rate"),
 };
+/// The data phase: the nominal time quantum, 17 quanta per bit at 5 Mbit/s, sample point
+/// at 76 %.
+const CAN_DATA_TIMING: can_timing::BitTiming =
+    match can_timing::data(CAN_CLOCK_HZ, CAN_DATA_BITRATE, CAN_TIMING.prescaler, 750) {
+        Ok(t) => t,
+        Err(_) => panic!("the FDCAN clock cannot make the CAN FD data rate"),
+    };
 
 /// Clocks: 24 MHz crystal (the fingertip board and the NUCLEO-G474RE alike) / 6 × 85 =
 /// 340 MHz VCO; R / 2 = 170 MHz SYSCLK (boost mode); Q / 4 = 85 MHz for the FDCAN
-/// (85 time quanta per bit at 1 Mbit/s); the ADC runs from SYSCLK, divided to 42.5 MHz
-/// by the HAL.
-fn clocks() -> embassy_stm32::Config {
+/// (85 time quanta per bit at 1 Mbit/s, 17 at 5 Mbit/s); the ADC runs from SYSCLK,
+/// divided to 42.5 MHz by the HAL. Without the crystal (`crystal` false: it did not
+/// start), the internal 16 MHz oscillator / 4 × 85 gives the same frequencies, within its
+/// ±1 % (outside the CAN FD data phase's tolerance: the status says so).
+fn clocks(crystal: bool) -> embassy_stm32::Config {
     use embassy_stm32::rcc::*;
     let mut config = embassy_stm32::Config::default();
-    config.rcc.hse = Some(Hse {
-        freq: Hertz(24_000_000),
-        mode: HseMode::Oscillator,
-    });
+    let (source, prediv) = if crystal {
+        config.rcc.hse = Some(Hse {
+            freq: Hertz(24_000_000),
+            mode: HseMode::Oscillator,
+        });
+        (PllSource::HSE, PllPreDiv::DIV6)
+    } else {
+        config.rcc.hsi = true;
+        (PllSource::HSI, PllPreDiv::DIV4)
+    };
     config.rcc.pll = Some(Pll {
-        source: PllSource::HSE,
-        prediv: PllPreDiv::DIV6,
+        source,
+        prediv,
         mul: PllMul::MUL85,
         divp: None,
         divq: Some(PllQDiv::DIV4),
@@ -151,12 +233,42 @@ struct Board {
     receiver: Option<Receiver>,
     adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    sampler: Sampler,
+    front_end: FrontEnd,
     sensor: Tmp117<I2c<'static, Async, Master>, Delay>,
-    can_tx: CanTx<'static>,
     can_rx: CanRx<'static>,
     can_properties: Properties,
     watchdog: IndependentWatchdog<'static, IWDG>,
+}
+
+/// The clock security system saw the crystal stop: the core fell back to the internal
+/// oscillator and the PLL stopped, so no timing holds. Start over: the boot's probe finds
+/// the crystal dead and runs from the internal oscillator (`FaultClockFallback`).
+#[exception]
+unsafe fn NonMaskableInt() {
+    regs::clear_clock_failure();
+    SCB::sys_reset();
+}
+
+/// The strap pins' levels, bit `i` strap `i` (PB4 + i), high when open: read with the
+/// pull-ups on, which are switched off again (a tied strap would draw through them).
+fn read_straps(pins: [Input<'_>; node_id::STRAPS]) -> u8 {
+    // The pull-ups charge the pins' capacitance in well under 10 µs.
+    cortex_m::asm::delay(CORE_CLOCK_HZ / 100_000);
+    pins.iter()
+        .enumerate()
+        .fold(0, |v, (i, p)| v | (u8::from(p.is_high()) << i))
+}
+
+/// No node id: the board stays off the bus (any id it picked could be another finger's)
+/// and says why, once a second, on its debug log. The watchdog is not running yet.
+fn without_node_id(e: NodeIdError) -> ! {
+    loop {
+        error!(
+            "{}: not joining the bus; strap the node id (see the wiring table)",
+            e
+        );
+        cortex_m::asm::delay(CORE_CLOCK_HZ);
+    }
 }
 
 #[entry]
@@ -170,19 +282,31 @@ fn main() -> ! {
         detector,
         temperature: sensor_handle,
         can_rx: can_rx_handle,
-        can_tx: can_tx_handle,
         bus,
         watchdog,
     } = b.handles;
+    interrupt::UART4.set_priority(DETECTOR_PRIORITY);
+    let high = EXECUTOR_HIGH.start(interrupt::UART4);
+    spawn!(
+        high,
+        detector_task(
+            b.service,
+            Scans {
+                adc: b.adc,
+                timer: b.timer,
+                front_end: b.front_end,
+                handle: sampler,
+            },
+            detector,
+            b.rate_hz,
+        )
+    );
     let executor = EXECUTOR.init(Executor::new());
     executor.run(move |spawner: Spawner| {
-        spawn!(spawner, detector_task(b.service, detector, b.rate_hz));
-        spawn!(spawner, sampler_task(b.adc, b.timer, b.sampler, sampler));
         spawn!(spawner, temperature(b.sensor, sensor_handle));
         if let Some(receiver) = b.receiver {
             spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
         }
-        spawn!(spawner, can_tx(b.can_tx, can_tx_handle));
         spawn!(spawner, can_supervisor(b.can_properties, bus));
         spawn!(spawner, watchdog_task(b.watchdog, watchdog));
     })
@@ -194,14 +318,43 @@ fn setup() -> Board {
     // The reset reason, read before the HAL touches the RCC, and cleared so the next
     // boot reports its own.
     let reset = reset::reset_reason(regs::take_reset_flags());
-    let p = embassy_stm32::init(clocks());
+    // A dead crystal must not hang the boot before the watchdog runs: probe it with a
+    // timeout first, and fall back to the internal oscillator.
+    let crystal = regs::hse_starts();
+    let p = embassy_stm32::init(clocks(crystal));
+    if crystal {
+        regs::enable_clock_security();
+    } else {
+        warn!("the crystal did not start: running from the internal oscillator");
+    }
+    // The node id, at run time: one image serves every finger. The flash key-value
+    // store's `node_id` key goes where `None` stands (the store is not on the board yet).
+    let straps = read_straps([
+        Input::new(p.PB4, Pull::Up),
+        Input::new(p.PB5, Pull::Up),
+        Input::new(p.PB6, Pull::Up),
+        Input::new(p.PB7, Pull::Up),
+    ]);
+    let (node, node_source) = match node_id::resolve(None, straps) {
+        Ok(found) => found,
+        Err(e) => without_node_id(e),
+    };
     info!(
-        "fingertip node {=u8}, reset: {=str}, config {=str} crc32 {=u32:#010x}",
-        boot::NODE_ID.get(),
+        "fingertip node {=u8} (from its {=str}), reset: {=str}, config {=str} crc32 {=u32:#010x}, {=str}",
+        node.get(),
+        node_source.name(),
         reset.name(),
         boot::CONFIG_SOURCE,
-        boot::CONFIG_CHECKSUM
+        boot::CONFIG_CHECKSUM,
+        boot::BUS_FORMAT.name()
     );
+    let board = BoardInfo {
+        node,
+        node_source,
+        format: boot::BUS_FORMAT,
+        reset,
+        clock_fallback: !crystal,
+    };
 
     regs::freeze_watchdog_when_halted();
 
@@ -214,7 +367,7 @@ fn setup() -> Board {
 
     // The detector before anything else is built on the stack: loading the image is the
     // deepest stack of the firmware.
-    let service = build_detector(reset);
+    let service = build_detector(board);
     let rate_hz = service.rate_hz();
     match service.fallback_reason() {
         None => info!("detector in service"),
@@ -226,7 +379,8 @@ fn setup() -> Board {
     let receiver = service.receiver();
     let handles = SHARED.init_with(Shared::new).split();
 
-    // ADC1: the four analog channels, one scan per TIM6 update, circular DMA.
+    // ADC1: the four analog channels, one scan per TIM6 update, circular DMA over two
+    // scans (an interrupt per scan).
     let adc = Adc::new(p.ADC1, AdcConfig::default());
     let sequence = [
         (p.PA0.degrade_adc(), SampleTime::CYCLES47_5), // force_x
@@ -234,9 +388,11 @@ fn setup() -> Board {
         (p.PB0.degrade_adc(), SampleTime::CYCLES47_5), // skin_accel
         (p.PB1.degrade_adc(), SampleTime::CYCLES47_5), // stress_rate
     ];
+    // SAFETY: the only reference to the buffer ever made; see `DmaBuffer`.
+    let dma_buffer: &'static mut [u16; DMA_LEN] = unsafe { &mut *ADC_DMA.0.get() };
     let ring = adc.into_ring_buffered(
         p.DMA1_CH1,
-        ADC_DMA.init([0; DMA_LEN]),
+        dma_buffer,
         Irqs,
         sequence.into_iter(),
         embassy_stm32::triggers::TIM6_TRGO,
@@ -268,55 +424,86 @@ fn setup() -> Board {
     );
     let sensor = Tmp117::new(i2c, Delay, tmp117::DEFAULT_ADDRESS, I2C_TIMEOUT_MS);
 
-    // FDCAN1, classic CAN at 1 Mbit/s. Only this node's three receive identifiers are
-    // accepted, in hardware; bus-off recovery is the supervisor's (with back-off), not
-    // the HAL's immediate one.
+    // FDCAN1, CAN FD at 1 Mbit/s arbitration and 5 Mbit/s data (or classic CAN at
+    // 1 Mbit/s). Only this node's receive identifiers are accepted, in hardware; bus-off
+    // recovery is the supervisor's (with back-off), not the HAL's immediate one.
     let mut can = CanConfigurator::new(p.FDCAN1, p.PA11, p.PA12, Irqs);
-    let (Some(prescaler), Some(seg1), Some(seg2), Some(sync_jump_width)) = (
-        NonZeroU16::new(CAN_TIMING.prescaler),
-        NonZeroU8::new(CAN_TIMING.seg1),
-        NonZeroU8::new(CAN_TIMING.seg2),
-        NonZeroU8::new(CAN_TIMING.sjw),
-    ) else {
-        defmt::panic!("CAN bit timing has a zero field");
-    };
-    can.set_config(
-        can.config()
-            .set_nominal_bit_timing(can::config::NominalBitTiming {
-                prescaler,
-                seg1,
-                seg2,
-                sync_jump_width,
+    let field = |v: u8| NonZeroU8::new(v).unwrap_or(NonZeroU8::MIN);
+    let prescaler = |v: u16| NonZeroU16::new(v).unwrap_or(NonZeroU16::MIN);
+    let config = can
+        .config()
+        .set_nominal_bit_timing(can::config::NominalBitTiming {
+            prescaler: prescaler(CAN_TIMING.prescaler),
+            seg1: field(CAN_TIMING.seg1),
+            seg2: field(CAN_TIMING.seg2),
+            sync_jump_width: field(CAN_TIMING.sjw),
+        })
+        .set_automatic_bus_off_recovery(false)
+        .set_global_filter(can::config::GlobalFilter::reject_all());
+    can.set_config(match boot::BUS_FORMAT {
+        BusFormat::Fd => config
+            .set_data_bit_timing(can::config::DataBitTiming {
+                transceiver_delay_compensation: true,
+                prescaler: prescaler(CAN_DATA_TIMING.prescaler),
+                seg1: field(CAN_DATA_TIMING.seg1),
+                seg2: field(CAN_DATA_TIMING.seg2),
+                sync_jump_width: field(CAN_DATA_TIMING.sjw),
             })
-            .set_automatic_bus_off_recovery(false)
-            .set_global_filter(can::config::GlobalFilter::reject_all()),
-    );
+            .set_frame_transmit(can::config::FrameTransmissionConfig::AllowFdCanAndBRS),
+        BusFormat::Classic => {
+            config.set_frame_transmit(can::config::FrameTransmissionConfig::ClassicCanOnly)
+        }
+    });
     info!(
-        "CAN {=u32} bit/s: {=u32} quanta per bit, sample point {=u32} per mille",
+        "CAN FD {=u32}/{=u32} bit/s: {=u32}/{=u32} quanta per bit, sample points {=u32}/{=u32} per mille",
         CAN_BITRATE,
+        CAN_DATA_BITRATE,
         CAN_TIMING.quanta(),
-        CAN_TIMING.sample_point_permille()
+        CAN_DATA_TIMING.quanta(),
+        CAN_TIMING.sample_point_permille(),
+        CAN_DATA_TIMING.sample_point_permille()
     );
-    {
+    if let Some(r) = &receiver {
         use can::filter::{Action, FilterType, StandardFilter, StandardFilterSlot};
-        use fingertip_can::MessageKind;
-        let id = |k: MessageKind| k.id(boot::NODE_ID);
+        let [phase, context, part] = r.identifiers().map(|raw| {
+            fingertip_can::StandardId::new(raw).unwrap_or(fingertip_can::StandardId::ZERO)
+        });
         can.properties().set_standard_filter(
             StandardFilterSlot::_0,
             StandardFilter {
-                filter: FilterType::DedicatedDual(id(MessageKind::Phase), id(MessageKind::Context)),
+                filter: FilterType::DedicatedDual(phase, context),
                 action: Action::StoreInFifo0,
             },
         );
         can.properties().set_standard_filter(
             StandardFilterSlot::_1,
             StandardFilter {
-                filter: FilterType::DedicatedSingle(id(MessageKind::TipState)),
+                filter: FilterType::DedicatedSingle(part),
                 action: Action::StoreInFifo0,
             },
         );
     }
-    let (can_tx_half, can_rx_half, properties) = can.into_normal_mode().split();
+    let can = can.into_normal_mode();
+    // The HAL never enables transceiver delay compensation (writing the data bit timing
+    // clears it); the 200 ns data bit at 5 Mbit/s is shorter than the transceiver's loop
+    // delay, so the FDCAN must sample its own bits at a secondary point: set by register,
+    // now that the controller is configured.
+    if boot::BUS_FORMAT == BusFormat::Fd {
+        let offset = CAN_DATA_TIMING.tdc_offset();
+        if regs::enable_tdc(offset) {
+            info!(
+                "transceiver delay compensation on, offset {=u8} clocks",
+                offset
+            );
+        } else {
+            error!("transceiver delay compensation did not take: the data phase will err");
+        }
+    }
+    let (can_tx_half, can_rx_half, properties) = can.split();
+    // The transmit buffers are the transmit path's (`regs::FdcanTx`); the HAL's transmit
+    // half stays unused but alive: dropping both halves switches the peripheral off.
+    core::mem::forget(can_tx_half);
+    regs::enable_cancel_interrupt();
 
     let watchdog = IndependentWatchdog::new(p.IWDG, WATCHDOG_TIMEOUT_US);
 
@@ -327,9 +514,8 @@ fn setup() -> Board {
         receiver,
         adc: ring,
         timer,
-        sampler: Sampler::new(calib::NOMINAL, rate_hz),
+        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
         sensor,
-        can_tx: can_tx_half,
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
@@ -342,58 +528,71 @@ fn setup() -> Board {
 /// checked). In a static, not moved into the task: an async task's arguments are stored
 /// in its future twice (as arguments and as locals), and the engine is 3 KiB.
 #[inline(never)]
-fn build_detector(reset: ResetReason) -> &'static mut Service<'static, ApproachTick> {
+fn build_detector(board: BoardInfo) -> &'static mut Service<'static, ApproachTick> {
     let detector = DETECTOR.take();
-    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, reset))
+    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, board))
 }
 
-/// Reads the ADC's DMA ring a block at a time and hands it to the lib's [`Sampler`].
-#[embassy_executor::task]
-async fn sampler_task(
-    mut adc: RingBufferedAdc<'static, ADC1>,
+/// The reading of the scans: the ADC and its trigger (kept alive for the DMA), the front
+/// end, the sampler's handle.
+struct Scans {
+    adc: RingBufferedAdc<'static, ADC1>,
     timer: Timer<'static, TIM6>,
-    mut sampler: Sampler,
-    mut shared: SamplerHandle<'static>,
-) {
-    let mut block = [0u16; BLOCK_LEN];
-    adc.start();
-    timer.start();
-    loop {
-        match adc.read(&mut block).await {
-            Ok(_) => {
-                let now = Instant::now().as_micros();
-                sampler.on_block(&block, now, shared.temperature(), |s| {
-                    SAMPLES.try_send(s).is_ok()
-                });
-                shared.set_lost_samples(sampler.clock.lost());
-                shared.set_rail_episodes(sampler.front_end.rail_episodes());
-                shared.set_stuck_episodes(sampler.front_end.stuck_episodes());
-                shared.check_in();
-            }
-            Err(_) => {
-                // The DMA lapped us; the ring restarts at the next aligned scan.
-                sampler.on_overrun();
-                shared.adc_overrun();
-            }
-        }
-    }
+    front_end: FrontEnd,
+    handle: SamplerHandle<'static>,
 }
 
-/// One service tick per sample (the engine, or the fallback's heartbeat), timed with the
-/// DWT cycle counter; frames to the CAN queue.
+/// Scan `tick` from its slot of the DMA's ring.
+fn read_scan(tick: Tick) -> [u16; SCAN_LEN] {
+    let base = tick as usize % DMA_SCANS * SCAN_LEN;
+    let ptr = ADC_DMA.0.get().cast::<u16>();
+    // SAFETY: `base + k` < DMA_LEN; the DMA writes the other slot meanwhile (see
+    // `DmaBuffer`), and a torn read is detected and dropped by the caller.
+    core::array::from_fn(|k| unsafe { ptr.add(base + k).read_volatile() })
+}
+
+/// One tick per scan, as the DMA delivers it: the newest scan (older ones the DMA has
+/// overtaken are counted lost), calibrated, then one service tick (the engine, or the
+/// fallback's heartbeat) whose frames go into the transmit buffers at once; computation
+/// and lateness timed with the DWT cycle counter.
 #[embassy_executor::task]
 async fn detector_task(
     service: &'static mut Service<'static, ApproachTick>,
+    mut scans: Scans,
     mut shared: DetectorHandle<'static>,
     rate_hz: u32,
 ) {
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
+    let mut picker = ScanPicker::new();
     let mut last_masks = (0u8, 0u8);
     let detector = service.detector();
+    scans.adc.start();
+    scans.timer.start();
     loop {
-        let sample = SAMPLES.receive().await;
-        let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |f| {
-            TX_FRAMES.try_send(f).is_ok()
+        SCAN_READY.wait().await;
+        let Some(tick) = picker.pick(SCANS.completed()) else {
+            continue;
+        };
+        let raw = read_scan(tick);
+        let torn = picker.torn(tick, SCANS.completed());
+        let h = &mut scans.handle;
+        h.set_lost_samples(picker.lost());
+        h.check_in();
+        if torn {
+            continue;
+        }
+        scans.front_end.set_temperature(h.temperature());
+        let mut sample = scans.front_end.process(tick, &raw);
+        sample.converted_at = SCANS.completed_at(tick);
+        h.set_rail_episodes(scans.front_end.rail_episodes());
+        h.set_stuck_episodes(scans.front_end.stuck_episodes());
+        let result = runner.step(service, &sample, &mut shared, DWT::cycle_count, |frames| {
+            TX.lock(|t| {
+                let mut t = t.borrow_mut();
+                let pushed = t.push(frames);
+                t.pump(&mut regs::FdcanTx);
+                pushed
+            })
         });
 
         // Logs, after the timed part.
@@ -448,13 +647,16 @@ async fn temperature(
 #[embassy_executor::task]
 async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHandle<'static>) {
     loop {
-        match rx.read().await {
+        match rx.read_fd().await {
             Ok(envelope) => {
-                let now = shared.now();
                 let frame = &envelope.frame;
+                // The decoding and the CRC outside the lock, which the detector shares:
+                // under it, only the counter rule and the new values.
+                let decoded = receiver.decode(*frame.id(), frame.data());
+                let now = shared.now();
                 let result = shared
                     .rx()
-                    .with(|state| receiver.receive(state, now, *frame.id(), frame.data()));
+                    .with(|state| receiver.accept(state, now, decoded));
                 shared.frame_received();
                 if let Err(reason) = result {
                     defmt::debug!("frame rejected: {=str}", reason.name());
@@ -465,23 +667,9 @@ async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHan
     }
 }
 
-/// Sends the queued frames, in order.
-#[embassy_executor::task]
-async fn can_tx(mut tx: CanTx<'static>, mut shared: CanTxHandle<'static>) {
-    loop {
-        let frame = TX_FRAMES.receive().await;
-        let lost = match can::Frame::new_standard(frame.id().as_raw(), frame.data()) {
-            // A lower-priority frame pending in the controller was replaced by this one.
-            Ok(f) => tx.write(&f).await.is_some(),
-            Err(_) => true,
-        };
-        if lost {
-            shared.frame_lost();
-        }
-    }
-}
-
-/// Watches the controller's error state; lets it out of bus-off after a back-off.
+/// Watches the controller's error state; flushes the transmit path when the bus goes off
+/// (what was queued is stale by the time it comes back) and lets the controller out of
+/// bus-off after a back-off.
 #[embassy_executor::task]
 async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) {
     let mut supervisor = BusSupervisor::new();
@@ -493,8 +681,12 @@ async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) 
         if status.protocol_error {
             protocol_errors = protocol_errors.saturating_add(1);
         }
-        let events = supervisor.error_events();
-        if supervisor.poll(Instant::now().as_millis(), state) == BusAction::Recover {
+        let (events, bus_offs) = (supervisor.error_events(), supervisor.bus_off());
+        let action = supervisor.poll(Instant::now().as_millis(), state);
+        if supervisor.bus_off() != bus_offs {
+            TX.lock(|t| t.borrow_mut().flush(&mut regs::FdcanTx));
+        }
+        if action == BusAction::Recover {
             regs::fdcan_recover();
         }
         if supervisor.error_events() != events {

@@ -1,16 +1,23 @@
-//! Sample scheduling: the ADC trigger period, tick numbering of the DMA's scans, lost
-//! sample accounting, and the per-scan front end (calibration and rail watch).
+//! Sample scheduling: the numbering of the DMA's scans as detector ticks, lost scan
+//! accounting, and the per-scan front end (calibration and rail watch).
 //!
 //! On the chip, TIM6 triggers one ADC scan of the [`ADC_CHANNELS`] per detector tick, and
-//! the DMA writes the scans into a circular buffer; the sampler task receives them a
-//! half-buffer ([`BLOCK_SCANS`] scans) at a time. The hardware timer is the detector's
-//! clock: ticks are numbered by counting scans, so they cannot drift from the sample
-//! instants. When scans are lost (the DMA overwrote a half the task had not read yet),
-//! the count is resynchronized from the system clock, which runs from the same crystal,
-//! and the gap is counted as lost samples.
+//! the DMA writes the scans into a circular buffer of [`DMA_SCANS`] scans, one per half:
+//! its half-transfer and transfer-complete interrupts come once per scan. At each, the
+//! board hands the DMA's position (its remaining-transfers register) to
+//! [`ScanProgress::on_dma`], which counts the scans completed: **tick numbers come from the
+//! DMA's position**, so they cannot drift from the sample instants and never depend on
+//! when a task woke up. The DMA interrupt runs above everything else and takes a
+//! microsecond; it is never held back for a whole scan, so no position is missed.
+//!
+//! The detector task, woken per scan, reads the newest complete scan ([`ScanPicker`]): if it
+//! fell behind, the scans it can no longer read (the ring holds two) are counted lost, and
+//! it goes on from the DMA's count.
 //!
 //! Each scan goes through the front end: calibration, the rail watch ([`crate::rail`])
 //! and the stuck-value watch ([`crate::stuck`]); a channel either watch flags is faulty.
+
+use core::sync::atomic::{AtomicU8, AtomicU16, AtomicU32, Ordering};
 
 use detector_core::{Signal, Tick};
 
@@ -23,84 +30,115 @@ use crate::wiring::ADC_CHANNELS;
 /// Analog channels per scan.
 pub const SCAN_LEN: usize = ADC_CHANNELS.len();
 
-/// Scans per DMA half-buffer: the sampler wakes once per block (1 ms at 5 kHz). Small
-/// enough to keep the latency low, large enough that waking costs little.
-pub const BLOCK_SCANS: usize = 5;
+/// Scans in the DMA's circular buffer: one per half, so the DMA interrupts once per scan.
+pub const DMA_SCANS: usize = 2;
 
-/// Samples (u16) in one DMA half-buffer.
-pub const BLOCK_LEN: usize = BLOCK_SCANS * SCAN_LEN;
+/// Samples (u16) in the circular DMA buffer.
+pub const DMA_LEN: usize = DMA_SCANS * SCAN_LEN;
 
-/// Samples (u16) in the circular DMA buffer: two halves.
-pub const DMA_LEN: usize = 2 * BLOCK_LEN;
+/// The DMA's progress through its circular buffer, counted in scans: written by the DMA's
+/// interrupt (one writer), read by the detector task. Atomics only: no lock between the
+/// two.
+#[derive(Debug, Default)]
+pub struct ScanProgress {
+    /// The DMA's position at its last interrupt, `0..DMA_LEN`.
+    pos: AtomicU16,
+    /// Samples of the scan in progress already written, `0..SCAN_LEN`.
+    partial: AtomicU8,
+    /// Scans completed since the DMA started: the tick of the next scan, wrapping.
+    scans: AtomicU32,
+    /// The cycle count when each slot's latest scan was seen complete.
+    done_at: [AtomicU32; DMA_SCANS],
+}
 
-/// Numbers the scans with detector ticks and counts the ones lost.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+impl ScanProgress {
+    /// Nothing written yet.
+    pub const fn new() -> ScanProgress {
+        ScanProgress {
+            pos: AtomicU16::new(0),
+            partial: AtomicU8::new(0),
+            scans: AtomicU32::new(0),
+            done_at: [AtomicU32::new(0), AtomicU32::new(0)],
+        }
+    }
+
+    /// From the DMA's interrupt: the DMA has `remaining` transfers left before it wraps
+    /// (its CNDTR, `1..=DMA_LEN`), at cycle count `now`. Returns whether scans completed
+    /// since the last call. Called more often than once per half buffer, as the DMA's
+    /// interrupts are, it misses nothing.
+    pub fn on_dma(&self, remaining: u16, now: u32) -> bool {
+        let cap = DMA_LEN as u16;
+        let pos = cap.wrapping_sub(remaining.min(cap)) % cap;
+        let last = self.pos.swap(pos, Ordering::Relaxed);
+        let written = (pos + cap - last) % cap;
+        let partial = u16::from(self.partial.load(Ordering::Relaxed)) + written;
+        let done = u32::from(partial / SCAN_LEN as u16);
+        self.partial
+            .store((partial % SCAN_LEN as u16) as u8, Ordering::Relaxed);
+        if done == 0 {
+            return false;
+        }
+        let scans = self.scans.load(Ordering::Relaxed).wrapping_add(done);
+        // The newest complete scan's slot gets the time; an older one completed at the
+        // same interrupt was already late.
+        let slot = scans.wrapping_sub(1) as usize % DMA_SCANS;
+        if let Some(at) = self.done_at.get(slot) {
+            at.store(now, Ordering::Relaxed);
+        }
+        self.scans.store(scans, Ordering::Release);
+        true
+    }
+
+    /// Scans completed so far: the tick of the scan the DMA writes next.
+    pub fn completed(&self) -> Tick {
+        self.scans.load(Ordering::Acquire)
+    }
+
+    /// The cycle count when scan `tick` was seen complete (while its slot holds it).
+    pub fn completed_at(&self, tick: Tick) -> u32 {
+        self.done_at
+            .get(tick as usize % DMA_SCANS)
+            .map_or(0, |a| a.load(Ordering::Relaxed))
+    }
+}
+
+/// Which scan the detector reads next, and the scans it lost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct TickClock {
-    /// Ticks per second.
-    rate_hz: u32,
-    /// The tick of the next scan to arrive.
+pub struct ScanPicker {
+    /// The tick of the first scan not yet read.
     next: Tick,
-    /// System time of tick 0, µs; `None` before the first block.
-    origin_us: Option<u64>,
-    /// A block was lost: the next one resynchronizes from the system clock.
-    resync: bool,
     lost: u32,
 }
 
-impl TickClock {
-    /// A clock for scans at `rate_hz` (≥ 1); the first scan is tick 0.
-    pub const fn new(rate_hz: u32) -> TickClock {
-        TickClock {
-            rate_hz: if rate_hz == 0 { 1 } else { rate_hz },
-            next: 0,
-            origin_us: None,
-            resync: false,
-            lost: 0,
+impl ScanPicker {
+    /// Nothing read yet; the first scan is tick 0.
+    pub const fn new() -> ScanPicker {
+        ScanPicker { next: 0, lost: 0 }
+    }
+
+    /// With `completed` scans done, the tick of the scan to read now: the newest complete
+    /// one (older unread ones are counted lost: their slots are being written again), or
+    /// `None` when none is new.
+    pub fn pick(&mut self, completed: Tick) -> Option<Tick> {
+        let ahead = completed.wrapping_sub(self.next);
+        if ahead == 0 || ahead as i32 <= 0 {
+            return None;
         }
+        self.lost = self.lost.saturating_add(ahead - 1);
+        self.next = completed;
+        Some(completed.wrapping_sub(1))
     }
 
-    /// `scans` new scans arrived, the last of them completed at about `now_us` (system
-    /// time, µs). Returns the tick of the first of them; the others follow one tick apart.
-    pub fn on_block(&mut self, scans: u32, now_us: u64) -> Tick {
-        let span_us = u64::from(scans) * 1_000_000 / u64::from(self.rate_hz);
-        let origin = *self.origin_us.get_or_insert_with(|| {
-            // The block's first scan is tick 0.
-            now_us.saturating_sub(span_us)
-        });
-        if self.resync {
-            self.resync = false;
-            // Where the block's first scan falls on the system clock, rounded to a tick.
-            let first_us = now_us.saturating_sub(span_us).saturating_sub(origin);
-            let first = (first_us * u64::from(self.rate_hz) + 500_000) / 1_000_000;
-            let first = first as Tick; // Ticks wrap, as the core expects.
-            let gap = first.wrapping_sub(self.next);
-            // A gap that is "negative" (wake-up jitter made the estimate early) loses
-            // nothing: keep counting from where we were.
-            if (gap as i32) > 0 {
-                self.lost = self.lost.saturating_add(gap);
-                self.next = first;
-            }
+    /// Whether scan `tick`, read while `completed` scans were done, may have been
+    /// overwritten during the read: the scan after it completed, so the one after that
+    /// may have started in its slot. Such a scan is counted lost.
+    pub fn torn(&mut self, tick: Tick, completed: Tick) -> bool {
+        let torn = completed.wrapping_sub(tick) > 1;
+        if torn {
+            self.lost = self.lost.saturating_add(1);
         }
-        let first = self.next;
-        self.next = self.next.wrapping_add(scans);
-        first
-    }
-
-    /// The DMA overran the reader: some scans were lost; the next block resynchronizes.
-    pub fn on_overrun(&mut self) {
-        self.resync = true;
-    }
-
-    /// `n` scans were received but dropped downstream (the detector's queue was full);
-    /// their ticks are gone.
-    pub fn on_dropped(&mut self, n: u32) {
-        self.lost = self.lost.saturating_add(n);
-    }
-
-    /// The tick the next scan will get.
-    pub const fn next_tick(&self) -> Tick {
-        self.next
+        torn
     }
 
     /// Scans lost since boot (saturating).
@@ -115,6 +153,9 @@ impl TickClock {
 pub struct AdcSample {
     /// The tick of the scan.
     pub tick: Tick,
+    /// The cycle count when the scan's conversion was seen complete (the DMA's interrupt):
+    /// where the tick's lateness is measured from.
+    pub converted_at: u32,
     /// Calibrated values, in [`ADC_CHANNELS`] order and units.
     pub values: [Signal; SCAN_LEN],
     /// Channels currently faulty (stuck at a rail or frozen mid-scale), by their place in
@@ -200,109 +241,68 @@ impl FrontEnd {
     }
 }
 
-/// The sampler task's work for one DMA block: tick numbering, calibration, the rail
-/// watch, and the hand-over to the detector's queue.
-#[derive(Clone, Debug, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Sampler {
-    /// Tick numbering and lost-scan accounting.
-    pub clock: TickClock,
-    /// Calibration and rail watch.
-    pub front_end: FrontEnd,
-}
-
-impl Sampler {
-    /// A sampler at `rate_hz` with these calibrations.
-    pub fn new(calibration: [Calibration; SCAN_LEN], rate_hz: u32) -> Sampler {
-        Sampler {
-            clock: TickClock::new(rate_hz),
-            front_end: FrontEnd::new(calibration, rate_hz),
-        }
-    }
-
-    /// A block of [`BLOCK_SCANS`] scans, completed at about `now_us`, with the board
-    /// temperature `temperature`; each calibrated sample goes to `queue`, which returns
-    /// `false` when it is full (that tick is then lost and counted). Returns the tick of
-    /// the block's last scan.
-    pub fn on_block(
-        &mut self,
-        block: &[u16; BLOCK_LEN],
-        now_us: u64,
-        temperature: Option<Signal>,
-        mut queue: impl FnMut(AdcSample) -> bool,
-    ) -> Tick {
-        let mut tick = self.clock.on_block(BLOCK_SCANS as u32, now_us);
-        self.front_end.set_temperature(temperature);
-        for scan in block.chunks_exact(SCAN_LEN) {
-            let mut raw = [0u16; SCAN_LEN];
-            raw.copy_from_slice(scan);
-            if !queue(self.front_end.process(tick, &raw)) {
-                self.clock.on_dropped(1);
-            }
-            tick = tick.wrapping_add(1);
-        }
-        tick.wrapping_sub(1)
-    }
-
-    /// The DMA overran the reader.
-    pub fn on_overrun(&mut self) {
-        self.clock.on_overrun();
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::calib::NOMINAL;
 
+    /// Feeds `progress` the DMA's remaining count after `written` more samples.
+    fn advance(progress: &ScanProgress, remaining: &mut u16, written: u16, now: u32) -> bool {
+        let cap = DMA_LEN as u16;
+        let pos = (cap - *remaining + written) % cap;
+        *remaining = cap - pos;
+        progress.on_dma(*remaining, now)
+    }
+
     #[test]
-    fn ticks_count_scans_without_drift() {
-        let mut c = TickClock::new(5000);
-        // Blocks of 5 scans every 1 ms, with wake-up jitter up to 0.6 ms: tick numbers
-        // depend on the count alone.
-        let mut expected = 0;
-        for k in 0..10_000u64 {
-            let jitter = (k * 7919) % 600;
-            let first = c.on_block(5, 1_000 + k * 1_000 + jitter);
-            assert_eq!(first, expected);
-            expected += 5;
+    fn scans_are_counted_from_the_dmas_position() {
+        let p = ScanProgress::new();
+        let mut remaining = DMA_LEN as u16;
+        // Each scan in two interrupts' worth of samples (a half-transfer comes mid-way
+        // through no scan here, but the counting must not care), across many wraps.
+        for k in 0..10_000u32 {
+            assert!(!advance(&p, &mut remaining, 3, 10 * k));
+            assert!(advance(&p, &mut remaining, 1, 10 * k + 5));
+            assert_eq!(p.completed(), k + 1);
+            assert_eq!(p.completed_at(k), 10 * k + 5);
         }
-        assert_eq!(c.lost(), 0);
-    }
-
-    #[test]
-    fn an_overrun_resynchronizes_from_the_clock_and_counts_the_gap() {
-        let mut c = TickClock::new(5000);
-        assert_eq!(c.on_block(5, 1_000), 0);
-        assert_eq!(c.on_block(5, 2_000), 5);
-        // Blocks at 3 and 4 ms were overwritten; the one completing at 5 ms arrives late,
-        // at 5.3 ms.
-        c.on_overrun();
-        assert_eq!(c.on_block(5, 5_300), 22);
-        // 10..20 lost, plus the 0.3 ms late wake-up read as 1.5 ticks → 2.
-        assert_eq!(c.lost(), 12);
-        assert_eq!(c.next_tick(), 27);
-    }
-
-    #[test]
-    fn an_early_estimate_never_moves_the_count_back() {
-        let mut c = TickClock::new(5000);
-        c.on_block(5, 1_000);
-        c.on_overrun();
-        // The clock says the block is where we already are: nothing lost.
-        assert_eq!(c.on_block(5, 1_900), 5);
-        assert_eq!(c.lost(), 0);
-        c.on_dropped(3);
-        assert_eq!(c.lost(), 3);
+        // Two scans at one interrupt (a late interrupt): both counted, the newest stamped.
+        assert!(advance(&p, &mut remaining, 2 * SCAN_LEN as u16 - 1, 7));
+        assert_eq!(p.completed(), 10_001);
+        assert!(advance(&p, &mut remaining, 1, 9));
+        assert_eq!((p.completed(), p.completed_at(10_001)), (10_002, 9));
     }
 
     #[test]
     fn ticks_wrap_like_the_core_expects() {
-        let mut c = TickClock::new(5000);
-        c.next = u32::MAX - 2;
-        c.origin_us = Some(0);
-        assert_eq!(c.on_block(5, 10), u32::MAX - 2);
-        assert_eq!(c.next_tick(), 2);
+        let p = ScanProgress::new();
+        p.scans
+            .store(u32::MAX, core::sync::atomic::Ordering::Relaxed);
+        let mut remaining = DMA_LEN as u16;
+        assert!(advance(&p, &mut remaining, SCAN_LEN as u16, 1));
+        assert_eq!(p.completed(), 0);
+        let mut picker = ScanPicker {
+            next: u32::MAX,
+            lost: 0,
+        };
+        assert_eq!(picker.pick(0), Some(u32::MAX));
+    }
+
+    #[test]
+    fn the_picker_reads_the_newest_scan_and_counts_the_ones_it_missed() {
+        let mut picker = ScanPicker::new();
+        assert_eq!(picker.pick(0), None);
+        assert_eq!(picker.pick(1), Some(0));
+        assert_eq!(picker.pick(1), None, "nothing new");
+        assert_eq!(picker.pick(2), Some(1));
+        // Woken late: scans 2, 3 and 4 complete, 2 and 3 are gone.
+        assert_eq!(picker.pick(5), Some(4));
+        assert_eq!(picker.lost(), 2);
+        // Read while the next scan completed: fine; two scans later: torn.
+        assert!(!picker.torn(4, 5));
+        assert!(picker.torn(4, 6));
+        assert_eq!(picker.lost(), 3);
+        assert_eq!(picker.pick(6), Some(5));
     }
 
     #[test]
@@ -369,33 +369,5 @@ mod tests {
             fe.process(1, &[2058, 2058, 2048, 2048]).values[1],
             Signal::ZERO
         );
-    }
-
-    #[test]
-    fn a_block_becomes_five_calibrated_samples_and_a_full_queue_loses_ticks() {
-        let mut s = Sampler::new(NOMINAL, 5000);
-        let mut block = [2048u16; BLOCK_LEN];
-        block[SCAN_LEN] = 2048 + 205; // force_x of the second scan: +1 N
-        let mut got = Vec::new();
-        let last = s.on_block(&block, 1_000, None, |x| {
-            got.push(x);
-            true
-        });
-        assert_eq!(last, 4);
-        assert_eq!(
-            got.iter().map(|x| x.tick).collect::<Vec<_>>(),
-            [0, 1, 2, 3, 4]
-        );
-        assert!((got[1].values[0].to_f64() - 1.0).abs() < 0.01);
-        // The queue takes two and is full: three ticks lost, numbering goes on.
-        let mut room = 2;
-        let last = s.on_block(&block, 2_000, None, |_| {
-            room -= 1;
-            room >= 0
-        });
-        assert_eq!((last, s.clock.lost()), (9, 3));
-        s.on_overrun();
-        assert_eq!(s.on_block(&block, 5_000, None, |_| true), 24);
-        assert_eq!(s.clock.lost(), 3 + 10);
     }
 }

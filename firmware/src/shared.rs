@@ -7,11 +7,13 @@
 //!
 //! | handle | writes | reads |
 //! |---|---|---|
-//! | [`SamplerHandle`] | its counters (lost samples, ADC overruns, rail and stuck-value episodes), the overrun flag, its check-in | the temperature |
-//! | [`DetectorHandle`] | the detector's tick, the overrun and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
+//! | [`SamplerHandle`] | its counters (lost scans, rail and stuck-value episodes), its check-in | the temperature |
+//! | [`DetectorHandle`] | the detector's tick, the late and frame-dropped flags, its check-in | every counter, the latched flags (it takes them), the sensor fault |
+//!
+//! The sampler's and the detector's handles belong to one task on the board (the detector
+//! reads each scan itself), kept apart for what each part owns.
 //! | [`TemperatureHandle`] | the temperature ([`Watch`]), its counters (sensor errors, timeouts) | — |
 //! | [`CanRxHandle`] | its counters (frames, protocol errors) | the detector's tick |
-//! | [`CanTxHandle`] | its counter (frames lost), the frame-dropped flag | — |
 //! | [`BusHandle`] | its counters (bus-off, bus state events), the bus-error flag | — |
 //! | [`WatchdogHandle`] | starts the check-in rounds | the check-ins |
 //!
@@ -29,7 +31,7 @@
 //! the interleaving.
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
+use core::sync::atomic::{AtomicU16, AtomicU32, Ordering};
 
 use embassy_sync::blocking_mutex::Mutex;
 use embassy_sync::blocking_mutex::raw::CriticalSectionRawMutex;
@@ -48,11 +50,11 @@ pub type RawMutex = CriticalSectionRawMutex;
 /// last heartbeat": overrun, bus error, frame dropped), until the detector task takes
 /// them.
 #[derive(Debug, Default)]
-struct Latch(AtomicU8);
+struct Latch(AtomicU16);
 
 impl Latch {
     const fn new() -> Latch {
-        Latch(AtomicU8::new(0))
+        Latch(AtomicU16::new(0))
     }
 
     fn raise(&self, flags: FaultFlags) {
@@ -98,11 +100,8 @@ impl Counter {
 /// Everything counted since boot (read-only: each counter's writer is its task's).
 #[derive(Debug, Default)]
 pub struct Counters {
-    /// Scans lost: DMA overruns and scans dropped because the detector's queue was full
-    /// (sampler).
+    /// Scans lost: overwritten in the DMA's ring before the detector read them (sampler).
     pub lost_samples: Counter,
-    /// DMA overruns of the ADC ring buffer (sampler).
-    pub adc_overruns: Counter,
     /// Stuck-at-rail episodes, all channels (sampler).
     pub rail_episodes: Counter,
     /// Stuck-value episodes (a channel frozen mid-scale), all channels (sampler).
@@ -120,8 +119,6 @@ pub struct Counters {
     /// last protocol error code and clears it when read, so each error is seen by at
     /// most one of the two readers and the sum is a lower bound.
     pub rx_protocol_errors: Counter,
-    /// Frames the CAN transmit task could not send (mailbox replaced) (CAN transmit).
-    pub tx_lost: Counter,
     /// Received frames handed to the receiver (CAN receive).
     pub rx_frames: Counter,
 }
@@ -137,7 +134,6 @@ impl Counters {
     const fn new() -> Counters {
         Counters {
             lost_samples: Counter::new(),
-            adc_overruns: Counter::new(),
             rail_episodes: Counter::new(),
             stuck_episodes: Counter::new(),
             sensor_errors: Counter::new(),
@@ -145,7 +141,6 @@ impl Counters {
             bus_off: Counter::new(),
             bus_state_events: Counter::new(),
             rx_protocol_errors: Counter::new(),
-            tx_lost: Counter::new(),
             rx_frames: Counter::new(),
         }
     }
@@ -218,8 +213,6 @@ pub struct Handles<'a> {
     pub temperature: TemperatureHandle<'a>,
     /// The CAN receive task's.
     pub can_rx: CanRxHandle<'a>,
-    /// The CAN transmit task's.
-    pub can_tx: CanTxHandle<'a>,
     /// The CAN supervisor's.
     pub bus: BusHandle<'a>,
     /// The watchdog task's.
@@ -251,14 +244,13 @@ impl Shared {
             },
             temperature: TemperatureHandle(s),
             can_rx: CanRxHandle(s),
-            can_tx: CanTxHandle(s),
             bus: BusHandle(s),
             watchdog: WatchdogHandle(s),
         }
     }
 }
 
-/// The sampler task's handle.
+/// The sampler's handle: the reading of the scans.
 pub struct SamplerHandle<'a>(&'a Shared);
 
 impl SamplerHandle<'_> {
@@ -281,12 +273,6 @@ impl SamplerHandle<'_> {
     /// Publishes the stuck-value episodes so far (the front end's count).
     pub fn set_stuck_episodes(&mut self, n: u32) {
         self.0.counters.stuck_episodes.set(n);
-    }
-
-    /// The DMA overran the reader: counted, and latched for the next heartbeat.
-    pub fn adc_overrun(&mut self) {
-        self.0.counters.adc_overruns.add(1);
-        self.0.latched.raise(FaultFlags::OVERRUN);
     }
 
     /// The sampler is alive.
@@ -396,17 +382,6 @@ impl<'a> CanRxHandle<'a> {
     }
 }
 
-/// The CAN transmit task's handle.
-pub struct CanTxHandle<'a>(&'a Shared);
-
-impl CanTxHandle<'_> {
-    /// A frame could not be sent: counted, and latched for the next heartbeat.
-    pub fn frame_lost(&mut self) {
-        self.0.counters.tx_lost.add(1);
-        self.0.latched.raise(FaultFlags::TX_DROPPED);
-    }
-}
-
 /// The CAN supervisor's handle.
 pub struct BusHandle<'a>(&'a Shared);
 
@@ -446,36 +421,34 @@ mod tests {
     fn latched_flags_survive_until_reported() {
         let mut s = Shared::new();
         let mut h = s.split();
-        h.sampler.adc_overrun();
+        h.detector.raise(FaultFlags::LATE);
         let seen = h.detector.latched();
-        assert_eq!(seen, FaultFlags::OVERRUN);
+        assert_eq!(seen, FaultFlags::LATE);
         // Raised after the heartbeat read the flags: kept for the next one.
         h.bus.bus_error();
         h.detector.clear_reported(seen);
         assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
         h.detector.clear_reported(FaultFlags::BUS_ERROR);
-        h.can_tx.frame_lost();
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
+        h.bus.bus_error();
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
         // Not reported yet (no heartbeat cleared it): still there at the next look.
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
-        let c = h.detector.counters();
-        assert_eq!((c.tx_lost.get(), c.adc_overruns.get()), (1, 1));
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
     }
 
     #[test]
     fn a_flag_raised_again_between_the_read_and_the_clear_is_kept() {
         let mut s = Shared::new();
         let mut h = s.split();
-        h.can_tx.frame_lost();
-        // A heartbeat is built with the frame-dropped flag ...
+        h.bus.bus_error();
+        // A heartbeat is built with the bus-error flag ...
         let reported = h.detector.latched();
-        assert_eq!(reported, FaultFlags::TX_DROPPED);
-        // ... another frame is lost before the clear: the same flag, raised again ...
-        h.can_tx.frame_lost();
+        assert_eq!(reported, FaultFlags::BUS_ERROR);
+        // ... the bus errs again before the clear: the same flag, raised again ...
+        h.bus.bus_error();
         h.detector.clear_reported(reported);
         // ... and the next heartbeat reports it.
-        assert_eq!(h.detector.latched(), FaultFlags::TX_DROPPED);
-        h.detector.clear_reported(FaultFlags::TX_DROPPED);
+        assert_eq!(h.detector.latched(), FaultFlags::BUS_ERROR);
+        h.detector.clear_reported(FaultFlags::BUS_ERROR);
         assert_eq!(h.detector.latched(), FaultFlags(0));
     }
 
@@ -525,7 +498,11 @@ mod tests {
         let mut h = s.split();
         h.detector.set_now(42);
         assert_eq!(h.can_rx.now(), 42);
-        assert!(h.can_rx.rx().with(|rx| rx.link().context().is_none()));
+        assert!(
+            h.can_rx
+                .rx()
+                .with(|rx| rx.link().controller_time().is_none())
+        );
         h.sampler.check_in();
         h.detector.check_in();
         assert!(h.watchdog.round(Task::CRITICAL));

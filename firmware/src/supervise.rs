@@ -8,7 +8,7 @@ use core::sync::atomic::{AtomicU8, Ordering};
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[repr(u8)]
 pub enum Task {
-    /// The ADC sampler (a block every millisecond).
+    /// The reading of the ADC's scans (one per tick).
     Sampler = 1 << 0,
     /// The detector (a tick every 200 µs).
     Detector = 1 << 1,

@@ -1,17 +1,18 @@
 //! Codec cost per frame on the host: `cargo bench -p host-tests --bench can_codec`.
 //!
-//! Encodes and decodes every message kind, runs the receiver on a context frame and the
-//! transmitter on a tick with a decision, each a million times, and prints nanoseconds
-//! per call. A measurement, not a test: nothing here is asserted. The bench profile is
-//! the release profile (detector-core at opt-level "s", as on the chip).
+//! Encodes and decodes every message kind, runs the receiver on a broadcast context frame
+//! and the transmitter on a tick with a decision, each a million times, and prints
+//! nanoseconds per call. A measurement, not a test: nothing here is asserted. The bench
+//! profile is the release profile (detector-core at opt-level "s", as on the chip).
 
 use std::hint::black_box;
 use std::time::Instant;
 
 use detector_core::{Confidence, Decision, EventId, Level, Output};
 use fingertip_can::{
-    ConfidenceMsg, ContextMsg, Counter, EventMsg, FaultFlags, Id, Message, NodeId, PhaseMsg,
-    Receiver, ResetReason, RxState, Status, StatusPage, TipStateMsg, Transmitter, TxState,
+    Address, BusFormat, ContextGroup, ContextMsg, ContextPart, ContextPartMsg, ContextSlot,
+    Counter, EventMsg, FaultFlags, Id, LevelState, Message, NodeId, PhaseMsg, Receiver,
+    ResetReason, RxState, Status, StatusMsg, StatusPage, StreamMsg, Transmitter, TxState,
 };
 
 const N: u32 = 1_000_000;
@@ -31,8 +32,14 @@ fn time(name: &str, mut f: impl FnMut(u32)) {
 
 fn main() {
     let node = NodeId::new(5).unwrap_or_default();
-    let c = Counter::new(3).unwrap_or_default();
+    let group = ContextGroup::of(node);
+    let c = Counter(3);
     let one = Confidence::ONE;
+    let slot = ContextSlot {
+        vel_des: [500, -20],
+        acc_des: [100, 0],
+        pos_err: [-120, 33],
+    };
     let messages = [
         (
             "Event",
@@ -40,7 +47,6 @@ fn main() {
                 counter: c,
                 event: EventId(2),
                 level: Level::Confirm,
-                confidence: one,
                 tick: 1234,
                 onset_age: 17,
             }),
@@ -54,47 +60,55 @@ fn main() {
             }),
         ),
         (
-            "Context",
+            "Context (5 slots)",
             Message::Context(ContextMsg {
                 counter: c,
-                vel_des: [500, -20],
-                acc_des: [100, 0],
+                time_us: 1_000_000,
+                slots: [Some(slot); 5],
             }),
         ),
         (
-            "TipState",
-            Message::TipState(TipStateMsg {
+            "ContextPart",
+            Message::ContextPart(ContextPartMsg {
                 counter: c,
-                pos_err: [-120, 33],
+                part: ContextPart::Velocity,
+                value: [500, -20],
             }),
         ),
         (
-            "Confidence",
-            Message::Confidence(ConfidenceMsg {
-                seq: 7,
-                page: 0,
+            "Stream",
+            Message::Stream(StreamMsg {
+                counter: c,
                 evaluated: 0b111,
                 unjudgeable: 0,
-                confidences: [one, Confidence::ZERO, one],
+                levels: [LevelState::Alert; 8],
+                confidences: [one; 8],
             }),
         ),
         (
             "Status (health)",
-            Message::Status(StatusPage::Health {
-                reset: ResetReason::PowerOn,
-                faults: FaultFlags::CONTEXT_STALE,
-                uptime: 123_456,
-                phase: Some(1),
-                phase_seq: 9,
+            Message::Status(StatusMsg {
+                counter: c,
+                page: StatusPage::Health {
+                    reset: ResetReason::PowerOn,
+                    phase: Some(1),
+                    faults: FaultFlags::CONTEXT_STALE,
+                    phase_seq: 9,
+                },
             }),
         ),
     ];
     println!("codec cost per call, {N} calls each");
     for (name, m) in &messages {
+        let address = if m.kind().is_broadcast() {
+            Address::Group(group)
+        } else {
+            Address::Node(node)
+        };
         time(&format!("encode {name}"), |_| {
-            let _ = black_box(black_box(m).encode(node));
+            let _ = black_box(black_box(m).encode(address));
         });
-        let Ok(f) = m.encode(node) else { continue };
+        let Ok(f) = m.encode(address) else { continue };
         let id = Id::Standard(f.id());
         time(&format!("decode {name}"), |_| {
             let _ = black_box(Message::decode(black_box(id), black_box(f.data())));
@@ -105,24 +119,28 @@ fn main() {
         Ok(r) => r,
         Err(e) => panic!("{e}"),
     };
-    let frames: Vec<_> = (0..16u8)
+    let frames: Vec<_> = (0..=255u8)
         .filter_map(|k| {
             ContextMsg {
-                counter: Counter::new(k)?,
-                vel_des: [500, 0],
-                acc_des: [0, 0],
+                counter: Counter(k),
+                time_us: 1000 * u32::from(k),
+                slots: [Some(slot); 5],
             }
-            .encode(node)
+            .encode(group)
             .ok()
         })
         .collect();
     let mut state = RxState::new();
     time("Receiver::receive (context)", |i| {
-        let f = &frames[(i % 16) as usize];
+        // The controller's time goes round with the counter: start over each round.
+        if i % 256 == 0 {
+            state = RxState::new();
+        }
+        let f = &frames[(i % 256) as usize];
         let _ = black_box(rx.receive(&mut state, i, Id::Standard(f.id()), f.data()));
     });
 
-    let tx = match Transmitter::with_defaults(node, 5000) {
+    let tx = match Transmitter::with_defaults(node, BusFormat::Fd, 5000) {
         Ok(t) => t,
         Err(e) => panic!("{e}"),
     };

@@ -2,8 +2,9 @@
 //!
 //! Two formats are read, line by line:
 //! - the log format of `candump -l` / `candump -L`: `(1436509052.249713) can0 123#DEADBEEF`
-//!   (remote frames `123#R`, CAN FD `123##1DEADBEEF`, an optional trailing `T`/`R`
-//!   direction mark);
+//!   (remote frames `123#R`, CAN FD `ID##<flags><data>` with one hex digit of flags, bit 0
+//!   bit-rate switching and bit 1 the error state indicator, e.g. `123##1DEADBEEF`; an
+//!   optional trailing `T`/`R` direction mark);
 //! - the screen format of plain `candump`: `  can0  123   [8]  11 22 33 44 55 66 77 88`,
 //!   optionally preceded by a timestamp in parentheses (`-t a`, `-t d`, `-t z`: seconds;
 //!   `-t A`: a local date and time), with `-x` columns between interface and
@@ -11,7 +12,8 @@
 //!   the bytes.
 //!
 //! Blank lines and lines starting with `#` are skipped. Error frames (identifier flag
-//! 0x20000000) are recognized and marked.
+//! 0x20000000) are recognized and marked. The log format is written: classic frames as
+//! `ID#DATA`, CAN FD frames as `ID##1DATA` (bit-rate switching, as the protocol sends them).
 
 use std::fmt;
 use std::io::{self, Write};
@@ -40,6 +42,10 @@ pub struct LogFrame {
     pub error: bool,
     /// A CAN FD frame.
     pub fd: bool,
+    /// A CAN FD frame sent with bit-rate switching (flag 0x1).
+    pub brs: bool,
+    /// A CAN FD frame whose sender was error-passive (flag 0x2).
+    pub esi: bool,
     /// The data bytes (0..=8, or up to 64 for CAN FD).
     pub data: Vec<u8>,
 }
@@ -205,9 +211,16 @@ fn frame(id: Id, error: bool) -> LogFrame {
         remote: false,
         error,
         fd: false,
+        brs: false,
+        esi: false,
         data: Vec::new(),
     }
 }
+
+/// The CAN FD flags digit of the log format: bit 0 bit-rate switching, bit 1 error state
+/// indicator (bit 2, FD format, is implied by the `##`).
+const FLAG_BRS: u32 = 0x1;
+const FLAG_ESI: u32 = 0x2;
 
 /// `123#DEADBEEF`, `123#R`, `123#R4`, `123##1DEADBEEF`.
 fn parse_log_frame(tok: &str) -> Result<LogFrame, LineError> {
@@ -218,14 +231,18 @@ fn parse_log_frame(tok: &str) -> Result<LogFrame, LineError> {
     let mut f = frame(id, error);
     if let Some(fd) = payload.strip_prefix('#') {
         let mut chars = fd.chars();
-        match chars.next() {
-            Some(c) if c.is_ascii_hexdigit() => {}
-            _ => return bad("CAN FD frame without a flags digit"),
-        }
+        let Some(flags) = chars.next().and_then(|c| c.to_digit(16)) else {
+            return bad("CAN FD frame without a flags digit");
+        };
         f.fd = true;
+        f.brs = flags & FLAG_BRS != 0;
+        f.esi = flags & FLAG_ESI != 0;
         f.data = parse_hex_bytes(chars.as_str())?;
-        if f.data.len() > 64 {
-            return bad(format!("CAN FD frame with {} bytes", f.data.len()));
+        if !fingertip_can::is_fd_length(f.data.len()) {
+            return bad(format!(
+                "CAN FD frame with {} bytes (0..=8, 12, 16, 20, 24, 32, 48 or 64)",
+                f.data.len()
+            ));
         }
     } else if let Some(len) = payload.strip_prefix('R') {
         if !(len.is_empty() || (len.len() == 1 && len.chars().all(|c| c.is_ascii_digit()))) {
@@ -284,14 +301,15 @@ fn parse_screen_frame(tokens: &[&str]) -> Result<LogFrame, LineError> {
     }
     if len > 8 {
         f.fd = true;
-        if len > 64 {
+        if !fingertip_can::is_fd_length(len) {
             return bad(format!("frame with {len} bytes"));
         }
     }
     Ok(f)
 }
 
-/// Writes one frame in the candump log format, `(sec.usec) iface ID#HEX`.
+/// Writes one frame in the candump log format, `(sec.usec) iface ID#HEX` for a classic
+/// frame, `(sec.usec) iface ID##1HEX` for a CAN FD frame (with bit-rate switching).
 pub fn write_log_line(
     w: &mut dyn Write,
     time: Duration,
@@ -300,11 +318,12 @@ pub fn write_log_line(
 ) -> io::Result<()> {
     write!(
         w,
-        "({:010}.{:06}) {} {:03X}#",
+        "({:010}.{:06}) {} {:03X}#{}",
         time.as_secs(),
         time.subsec_micros(),
         iface,
-        frame.id().as_raw()
+        frame.id().as_raw(),
+        if frame.is_fd() { "#1" } else { "" }
     )?;
     for b in frame.data() {
         write!(w, "{b:02X}")?;
@@ -336,8 +355,12 @@ mod tests {
         assert!(matches!(e.id, Id::Extended(_)));
         assert!(e.data.is_empty());
         let fd = parse_line(1, "(1.5) can0 123##1112233").unwrap().unwrap();
-        assert!(fd.fd);
+        assert!(fd.fd && fd.brs && !fd.esi);
         assert_eq!(fd.data, [0x11, 0x22, 0x33]);
+        let esi = parse_line(1, "(1.5) can0 123##200").unwrap().unwrap();
+        assert!(esi.fd && !esi.brs && esi.esi);
+        let long = format!("(1.5) can0 123##1{}", "AB".repeat(64));
+        assert_eq!(parse_line(1, &long).unwrap().unwrap().data.len(), 64);
         let err = parse_line(1, "(1.5) can0 20000080#0000000000000000")
             .unwrap()
             .unwrap();
@@ -384,6 +407,9 @@ mod tests {
             "(1.0) can0 123#0",
             "(1.0) can0 123#GG",
             "(1.0) can0 123#000102030405060708",
+            "(1.0) can0 123##1000102030405060708",
+            "(1.0) can0 123##G00",
+            "(1.0) can0 123##",
             "  can0  123   [3]  11 22",
             "  can0  123   [x]  11",
             "(1.0) can0 123#00 extra words",
@@ -403,5 +429,16 @@ mod tests {
         let back = parse_line(1, &text).unwrap().unwrap();
         assert_eq!(back.data, [0xAB, 0x01]);
         assert_eq!(back.id, sid(0x0C2));
+        let fd = CanFrame::new_fd(StandardId::new(0x152).unwrap(), &[7; 12]).unwrap();
+        let mut out = Vec::new();
+        write_log_line(&mut out, Duration::new(1, 0), "can1", &fd).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(
+            text,
+            format!("(0000000001.000000) can1 152##1{}\n", "07".repeat(12))
+        );
+        let back = parse_line(1, &text).unwrap().unwrap();
+        assert!(back.fd && back.brs);
+        assert_eq!(back.data, [7; 12]);
     }
 }

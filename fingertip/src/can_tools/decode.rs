@@ -2,18 +2,21 @@
 //! status, reporting every problem by line number without stopping.
 //!
 //! Problems: lines that are not frames, frames of the protocol with a wrong length, a bad
-//! CRC or a value out of range, gaps and repetitions in the rolling counters of protected
-//! messages and in the confidence stream's sequence numbers, and CAN error frames.
-//! Frames with identifiers outside the protocol are counted as foreign, not reported.
+//! CRC or a value out of range, gaps and repetitions in the counters (every frame of the
+//! protocol has one, per identifier) and in the classic stream's sample numbers, remote
+//! frames, and CAN error frames. Frames with identifiers outside the protocol are counted
+//! as foreign, not reported. CAN FD and classic frames are read alike: a message is known
+//! by its identifier and its length.
 
 use std::collections::HashMap;
 use std::fmt;
 use std::io::{self, BufRead, Write};
 use std::path::Path;
 
-use detector_core::{Level, Tick};
+use detector_core::{Level, MAX_EVENTS, Tick};
 use fingertip_can::{
-    ConfidenceMsg, Counter, DecodeError, EventMsg, Message, MessageKind, NodeId, StatusPage,
+    Address, ContextGroup, ContextPart, ContextSlot, Counter, DecodeError, EventMsg, LevelState,
+    Message, MessageKind, NodeId, StatusPage,
 };
 
 use super::CanToolError;
@@ -27,9 +30,9 @@ pub struct DecodeOptions {
     pub tick_rate_hz: f64,
     /// Event names by index (from the configuration); `event<i>` where missing.
     pub event_names: Vec<String>,
-    /// Only this node's frames, if set.
+    /// Only this node's frames (and the context frames of its group), if set.
     pub node: Option<NodeId>,
-    /// Print every confidence page (otherwise only events, status and problems).
+    /// Print every stream sample (otherwise only events, status and problems).
     pub print_confidences: bool,
 }
 
@@ -52,6 +55,14 @@ impl DecodeOptions {
             .cloned()
             .unwrap_or_else(|| format!("event{index}"))
     }
+
+    fn wants(&self, address: Address) -> bool {
+        match (self.node, address) {
+            (None, _) => true,
+            (Some(n), Address::Node(m)) => n == m,
+            (Some(n), Address::Group(g)) => ContextGroup::of(n) == g,
+        }
+    }
 }
 
 /// A decoded frame of the protocol.
@@ -61,10 +72,56 @@ pub struct Record {
     pub line: usize,
     /// Timestamp in seconds, when known.
     pub time: Option<f64>,
-    /// The node.
-    pub node: NodeId,
+    /// The node (or, for a broadcast context frame, the group) of its identifier.
+    pub address: Address,
     /// The message.
     pub message: Message,
+}
+
+/// One event's value in a stream sample, whichever the bus format.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StreamValue {
+    /// The sample's number (the CAN FD frame's counter, the classic page's `Sample`).
+    pub sample: u8,
+    /// The event.
+    pub event: usize,
+    /// Its confidence, 0..=1.
+    pub confidence: f64,
+    /// Its level since the last sample.
+    pub level: LevelState,
+    /// It cannot be judged.
+    pub unjudgeable: bool,
+}
+
+impl Record {
+    /// The node, for a frame a fingertip sent or one addressed to one fingertip.
+    pub fn node(&self) -> Option<NodeId> {
+        self.address.node()
+    }
+
+    /// The evaluated events' values of a stream frame (empty for other messages).
+    pub fn stream_values(&self) -> Vec<StreamValue> {
+        match &self.message {
+            Message::Stream(m) => (0..MAX_EVENTS)
+                .filter(|e| m.evaluated & (1 << e) != 0)
+                .map(|e| StreamValue {
+                    sample: m.counter.get(),
+                    event: e,
+                    confidence: m.confidences[e].to_f64(),
+                    level: m.levels[e],
+                    unjudgeable: m.unjudgeable & (1 << e) != 0,
+                })
+                .collect(),
+            Message::StreamPage(p) => vec![StreamValue {
+                sample: p.sample,
+                event: usize::from(p.event.0),
+                confidence: p.confidence.to_f64(),
+                level: p.level,
+                unjudgeable: p.unjudgeable,
+            }],
+            _ => Vec::new(),
+        }
+    }
 }
 
 /// A problem found in a log.
@@ -78,15 +135,15 @@ pub enum Problem {
     /// A frame of the protocol that does not decode (wrong length, bad CRC, value out of
     /// range).
     Invalid {
-        /// The node of its identifier.
-        node: NodeId,
+        /// The address of its identifier.
+        address: Address,
         /// What was wrong.
         error: DecodeError,
     },
-    /// A protected message's counter skipped values: frames were lost.
+    /// A counter skipped values: frames were lost.
     CounterGap {
-        /// The node.
-        node: NodeId,
+        /// The address of the identifier.
+        address: Address,
         /// The message.
         kind: MessageKind,
         /// The counter expected.
@@ -94,41 +151,32 @@ pub enum Problem {
         /// The counter found.
         got: u8,
     },
-    /// A protected message's counter did not advance: a repeated frame.
+    /// A counter did not advance: a repeated frame.
     CounterRepeated {
-        /// The node.
-        node: NodeId,
+        /// The address of the identifier.
+        address: Address,
         /// The message.
         kind: MessageKind,
         /// The counter found again.
         counter: u8,
     },
-    /// The confidence stream's sequence number skipped samples.
+    /// The classic stream's sample number skipped samples.
     SequenceGap {
         /// The node.
         node: NodeId,
-        /// The sequence number expected (or the current one).
+        /// The sample number expected (or the current one).
         expected: u8,
-        /// The sequence number found.
+        /// The sample number found.
         got: u8,
     },
     /// A CAN error frame.
     ErrorFrame,
     /// A remote frame for an identifier of the protocol, which uses none.
     Remote {
-        /// The node.
-        node: NodeId,
+        /// The address of the identifier.
+        address: Address,
         /// The message.
         kind: MessageKind,
-    },
-    /// A CAN FD frame on an identifier of the protocol, whose frames are classic CAN.
-    FdFrame {
-        /// The node.
-        node: NodeId,
-        /// The message of the identifier.
-        kind: MessageKind,
-        /// Its data length.
-        len: usize,
     },
     /// An event frame for an event the configuration does not have.
     UnknownEvent {
@@ -141,31 +189,39 @@ pub enum Problem {
     },
 }
 
+/// `node 3` or `group 1`, as problems and records print an address.
+pub fn address_text(a: Address) -> String {
+    match a {
+        Address::Node(n) => format!("node {}", n.get()),
+        Address::Group(g) => format!("group {}", g.get()),
+    }
+}
+
 impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Problem::Malformed { reason } => write!(f, "malformed line: {reason}"),
-            Problem::Invalid { node, error } => write!(f, "node {}: {error}", node.get()),
+            Problem::Invalid { address, error } => write!(f, "{}: {error}", address_text(*address)),
             Problem::CounterGap {
-                node,
+                address,
                 kind,
                 expected,
                 got,
             } => write!(
                 f,
-                "node {}: {} counter gap: expected {expected}, got {got} ({} lost)",
-                node.get(),
+                "{}: {} counter gap: expected {expected}, got {got} ({} lost)",
+                address_text(*address),
                 kind.name(),
-                got.wrapping_sub(*expected) & 0x0F
+                got.wrapping_sub(*expected)
             ),
             Problem::CounterRepeated {
-                node,
+                address,
                 kind,
                 counter,
             } => write!(
                 f,
-                "node {}: {} counter repeated ({counter})",
-                node.get(),
+                "{}: {} counter repeated ({counter})",
+                address_text(*address),
                 kind.name()
             ),
             Problem::SequenceGap {
@@ -174,19 +230,18 @@ impl fmt::Display for Problem {
                 got,
             } => write!(
                 f,
-                "node {}: confidence stream sequence gap: expected {expected}, got {got}",
+                "node {}: stream sample gap: expected {expected}, got {got}",
                 node.get()
             ),
             Problem::ErrorFrame => write!(f, "CAN error frame"),
-            Problem::Remote { node, kind } => {
-                write!(f, "node {}: remote frame for {}", node.get(), kind.name())
+            Problem::Remote { address, kind } => {
+                write!(
+                    f,
+                    "{}: remote frame for {}",
+                    address_text(*address),
+                    kind.name()
+                )
             }
-            Problem::FdFrame { node, kind, len } => write!(
-                f,
-                "node {}: a CAN FD frame ({len} bytes) on the identifier of {}, whose frames are classic CAN",
-                node.get(),
-                kind.name()
-            ),
             Problem::UnknownEvent { node, event, known } => write!(
                 f,
                 "node {}: event {event}, but the configuration has {known} events",
@@ -214,18 +269,11 @@ pub enum Item {
     Problem(LineProblem),
 }
 
-/// Per-node stream tracking.
-#[derive(Clone, Copy, Debug, Default)]
-struct StreamSeq {
-    seq: u8,
-    pages: u8,
-}
-
 /// A streaming decoder: feed it frames in order, get records and problems back.
 #[derive(Debug, Default)]
 pub struct Decoder {
-    counters: HashMap<(NodeId, MessageKind), Counter>,
-    streams: HashMap<NodeId, StreamSeq>,
+    counters: HashMap<u16, Counter>,
+    samples: HashMap<NodeId, u8>,
     rates: HashMap<NodeId, f64>,
     uptimes: HashMap<NodeId, Tick>,
     /// Frames decoded or rejected that belong to the protocol.
@@ -275,53 +323,45 @@ impl Decoder {
             out.push(problem(Problem::ErrorFrame));
             return out;
         }
-        let Some((kind, node)) = MessageKind::from_id(f.id) else {
+        let Some((kind, address)) = MessageKind::from_id(f.id) else {
             self.foreign_frames += 1;
             return out;
         };
-        if opts.node.is_some_and(|n| n != node) {
+        if !opts.wants(address) {
             return out;
         }
         self.protocol_frames += 1;
-        if f.fd {
-            out.push(problem(Problem::FdFrame {
-                node,
-                kind,
-                len: f.data.len(),
-            }));
-            return out;
-        }
         if f.remote {
-            out.push(problem(Problem::Remote { node, kind }));
+            out.push(problem(Problem::Remote { address, kind }));
             return out;
         }
         let message = match Message::decode(f.id, &f.data) {
             Ok((_, m)) => m,
             Err(error) => {
-                out.push(problem(Problem::Invalid { node, error }));
+                out.push(problem(Problem::Invalid { address, error }));
                 return out;
             }
         };
-        if let Some(c) = message.counter()
-            && let Some(last) = self.counters.insert((node, kind), c)
-        {
+        let c = message.counter();
+        if let Some(last) = self.counters.insert(kind.raw_id_of(address.index()), c) {
             match last.delta_to(c) {
                 1 => {}
                 0 => out.push(problem(Problem::CounterRepeated {
-                    node,
+                    address,
                     kind,
                     counter: c.get(),
                 })),
                 _ => out.push(problem(Problem::CounterGap {
-                    node,
+                    address,
                     kind,
                     expected: last.next().get(),
                     got: c.get(),
                 })),
             }
         }
-        match message {
-            Message::Event(e)
+        let node = address.node();
+        match (message, node) {
+            (Message::Event(e), Some(node))
                 if !opts.event_names.is_empty()
                     && usize::from(e.event.0) >= opts.event_names.len() =>
             {
@@ -331,53 +371,41 @@ impl Decoder {
                     known: opts.event_names.len(),
                 }));
             }
-            Message::Confidence(m) => {
-                let bit = 1u8 << m.page;
-                let entry = self.streams.get(&node).copied();
-                let next = match entry {
-                    Some(s) if s.seq == m.seq && s.pages & bit == 0 => StreamSeq {
-                        seq: s.seq,
-                        pages: s.pages | bit,
-                    },
-                    Some(s) => {
-                        if m.seq != s.seq.wrapping_add(1) {
-                            out.push(problem(Problem::SequenceGap {
-                                node,
-                                expected: s.seq.wrapping_add(1),
-                                got: m.seq,
-                            }));
-                        }
-                        StreamSeq {
-                            seq: m.seq,
-                            pages: bit,
-                        }
-                    }
-                    None => StreamSeq {
-                        seq: m.seq,
-                        pages: bit,
-                    },
-                };
-                self.streams.insert(node, next);
+            (Message::StreamPage(p), Some(node)) => {
+                // Pages of one sample share its number; a new number must be the next.
+                if let Some(last) = self.samples.insert(node, p.sample)
+                    && p.sample != last
+                    && p.sample != last.wrapping_add(1)
+                {
+                    out.push(problem(Problem::SequenceGap {
+                        node,
+                        expected: last.wrapping_add(1),
+                        got: p.sample,
+                    }));
+                }
             }
-            Message::Status(StatusPage::Timing { tick_rate_hz, .. }) if tick_rate_hz > 0 => {
-                self.rates.insert(node, f64::from(tick_rate_hz));
-            }
-            Message::Status(StatusPage::Health { uptime, .. }) => {
-                self.uptimes.insert(node, uptime);
-            }
+            (Message::Status(s), Some(node)) => match s.page {
+                StatusPage::Identity { tick_rate_hz, .. } if tick_rate_hz > 0 => {
+                    self.rates.insert(node, f64::from(tick_rate_hz));
+                }
+                StatusPage::Uptime { uptime } => {
+                    self.uptimes.insert(node, uptime);
+                }
+                _ => {}
+            },
             _ => {}
         }
         out.push(Item::Record(Record {
             line: f.line,
             time: f.time,
-            node,
+            address,
             message,
         }));
         out
     }
 
-    /// One line of text for an item, as `fingertip decode` prints it; `None` for
-    /// confidence pages when `opts.print_confidences` is off.
+    /// One line of text for an item, as `fingertip decode` prints it; `None` for stream
+    /// frames when `opts.print_confidences` is off.
     pub fn describe(&self, item: &Item, opts: &DecodeOptions) -> Option<String> {
         match item {
             Item::Problem(p) => Some(format!("line {}: {}", p.line, p.problem)),
@@ -386,31 +414,57 @@ impl Decoder {
                     .time
                     .map(|t| format!("{t:.6}"))
                     .unwrap_or_else(|| "-".into());
-                let head = format!("{time} node {:>2}", r.node.get());
-                let rate = self.tick_rate(r.node, opts.tick_rate_hz);
+                let head = match r.address {
+                    Address::Node(n) => format!("{time} node {:>2}", n.get()),
+                    Address::Group(g) => format!("{time} group {}", g.get()),
+                };
+                let rate = r
+                    .node()
+                    .map_or(opts.tick_rate_hz, |n| self.tick_rate(n, opts.tick_rate_hz));
                 let body = match &r.message {
                     Message::Event(m) => describe_event(m, rate, opts),
-                    Message::Confidence(m) => {
+                    Message::Stream(_) | Message::StreamPage(_) => {
                         if !opts.print_confidences {
                             return None;
                         }
-                        describe_confidences(m, opts)
+                        describe_stream(r, opts)
                     }
-                    Message::Status(p) => describe_status(p),
+                    Message::Status(p) => describe_status(&p.page),
                     Message::Phase(m) => {
                         format!("phase     {} (sequence {})", m.phase, m.sequence)
                     }
                     Message::Context(m) => {
-                        let v = m.vel_des.map(|r| f64::from(r) * 1e-4);
-                        let a = m.acc_des.map(|r| f64::from(r) * 2e-3);
-                        format!(
-                            "context   vel_des ({:+.4}, {:+.4}) m/s  acc_des ({:+.3}, {:+.3}) m/s²",
-                            v[0], v[1], a[0], a[1]
-                        )
+                        let Address::Group(g) = r.address else {
+                            return None;
+                        };
+                        let mut s = format!("context   t {} us", m.time_us);
+                        for (k, slot) in m.slots.iter().enumerate() {
+                            let Some(n) = g.node(k) else { continue };
+                            if opts.node.is_some_and(|o| o != n) {
+                                continue;
+                            }
+                            match slot {
+                                Some(slot) => {
+                                    s.push_str(&format!(" | {}: {}", n.get(), describe_slot(slot)))
+                                }
+                                None => s.push_str(&format!(" | {}: empty", n.get())),
+                            }
+                        }
+                        s
                     }
-                    Message::TipState(m) => {
-                        let p = m.pos_err.map(|r| f64::from(r) * 1e-3);
-                        format!("tip state pos_err ({:+.3}, {:+.3}) mm", p[0], p[1])
+                    Message::ContextPart(m) => {
+                        let [x, y] = m.value.map(|v| f64::from(v) * m.part.scale());
+                        match m.part {
+                            ContextPart::Velocity => {
+                                format!("context   vel_des ({x:+.4}, {y:+.4}) m/s")
+                            }
+                            ContextPart::Acceleration => {
+                                format!("context   acc_des ({x:+.3}, {y:+.3}) m/s²")
+                            }
+                            ContextPart::PositionError => {
+                                format!("context   pos_err ({:+.3}, {:+.3}) mm", 1e3 * x, 1e3 * y)
+                            }
+                        }
                     }
                 };
                 Some(format!("{head}  {body}"))
@@ -419,32 +473,46 @@ impl Decoder {
     }
 }
 
+fn describe_slot(s: &ContextSlot) -> String {
+    let v = s.vel_des.map(|r| f64::from(r) * ContextSlot::VEL_SCALE);
+    let a = s.acc_des.map(|r| f64::from(r) * ContextSlot::ACC_SCALE);
+    let p = s
+        .pos_err
+        .map(|r| f64::from(r) * ContextSlot::POS_SCALE * 1e3);
+    format!(
+        "vel_des ({:+.4}, {:+.4}) m/s acc_des ({:+.3}, {:+.3}) m/s² pos_err ({:+.3}, {:+.3}) mm",
+        v[0], v[1], a[0], a[1], p[0], p[1]
+    )
+}
+
 fn describe_event(m: &EventMsg, rate: f64, opts: &DecodeOptions) -> String {
     let level = match m.level {
         Level::Alert => "ALERT",
         Level::Confirm => "CONFIRM",
     };
     format!(
-        "EVENT     {} {level} confidence {} tick {} onset {:.1} ms earlier",
+        "EVENT     {} {level} tick {} onset {:.1} ms earlier",
         opts.event_name(usize::from(m.event.0)),
-        m.confidence,
         m.tick,
         f64::from(m.onset_age) * 1000.0 / rate
     )
 }
 
-fn describe_confidences(m: &ConfidenceMsg, opts: &DecodeOptions) -> String {
-    let mut s = format!("stream    seq {:3}", m.seq);
-    for (k, c) in m.confidences.iter().enumerate() {
-        if m.evaluated & (1 << k) != 0 {
-            let e = 3 * usize::from(m.page) + k;
-            let flag = if m.unjudgeable & (1 << k) != 0 {
-                " (unjudgeable)"
-            } else {
-                ""
-            };
-            s.push_str(&format!("  {}={c}{flag}", opts.event_name(e)));
-        }
+fn describe_stream(r: &Record, opts: &DecodeOptions) -> String {
+    let values = r.stream_values();
+    let sample = values.first().map_or(0, |v| v.sample);
+    let mut s = format!("stream    sample {sample:3}");
+    for v in values {
+        let flag = if v.unjudgeable { " unjudgeable" } else { "" };
+        let level = match v.level {
+            LevelState::None => String::new(),
+            l => format!(" {}", l.name()),
+        };
+        s.push_str(&format!(
+            "  {}={:.5}{level}{flag}",
+            opts.event_name(v.event),
+            v.confidence
+        ));
     }
     s
 }
@@ -453,9 +521,8 @@ fn describe_status(p: &StatusPage) -> String {
     match *p {
         StatusPage::Health {
             reset,
-            faults,
-            uptime,
             phase,
+            faults,
             phase_seq,
         } => {
             let names: Vec<&str> = fingertip_can::FaultFlags::NAMES
@@ -468,45 +535,56 @@ fn describe_status(p: &StatusPage) -> String {
                 .map(|p| format!("{p} (sequence {phase_seq})"))
                 .unwrap_or_else(|| "none".into());
             format!(
-                "status    uptime {uptime} ticks, phase {phase}, faults [{}], reset {}",
+                "status    phase {phase}, faults [{}], reset {}",
                 names.join(" "),
                 reset.name()
             )
         }
-        StatusPage::Timing {
-            overruns,
-            worst_tick,
+        StatusPage::Uptime { uptime } => format!("status    uptime {uptime} ticks"),
+        StatusPage::Identity {
             tick_rate_hz,
             protocol,
+            format,
+            node_source,
         } => format!(
-            "status    {tick_rate_hz} Hz, worst tick {:.1} µs, {overruns} overruns, protocol {protocol}",
+            "status    {tick_rate_hz} Hz, protocol {protocol}, {}, node id from {}",
+            format.name(),
+            node_source.name()
+        ),
+        StatusPage::Lateness { worst, late_ticks } => format!(
+            "status    worst lateness {:.1} µs, {late_ticks} late ticks",
+            f64::from(worst) / 10.0
+        ),
+        StatusPage::Compute {
+            worst_tick,
+            lost_scans,
+        } => format!(
+            "status    worst tick {:.1} µs, {lost_scans} scans lost",
             f64::from(worst_tick) / 10.0
         ),
         StatusPage::Link {
             stale_episodes,
             lost_frames,
+        } => format!("status    {stale_episodes} stale episodes, {lost_frames} lost frames"),
+        StatusPage::Bus {
             bus_errors,
-        } => format!(
-            "status    {stale_episodes} stale episodes, {lost_frames} lost frames, {bus_errors} bus errors"
-        ),
-        StatusPage::FrameRejects {
-            wrong_length,
-            unknown_id,
-            bad_crc,
-        } => format!(
-            "status    rejected: {wrong_length} wrong length, {unknown_id} unknown id, {bad_crc} bad CRC"
-        ),
-        StatusPage::ContentRejects {
-            sequence,
-            phase_not_configured,
-            out_of_range,
-        } => format!(
-            "status    rejected: {sequence} counter, {phase_not_configured} phase not configured, {out_of_range} out of range"
-        ),
-        StatusPage::Config {
-            checksum,
             tx_dropped,
-        } => format!("status    configuration 0x{checksum:08X}, {tx_dropped} frames not sent"),
+        } => format!("status    {bus_errors} bus errors, {tx_dropped} frames not sent"),
+        StatusPage::RejectsFrame {
+            wrong_length,
+            bad_crc,
+        } => format!("status    rejected: {wrong_length} wrong length, {bad_crc} bad CRC"),
+        StatusPage::RejectsContent {
+            sequence,
+            out_of_range,
+        } => format!("status    rejected: {sequence} repeated or old, {out_of_range} out of range"),
+        StatusPage::RejectsRoute {
+            unknown_id,
+            phase_not_configured,
+        } => format!(
+            "status    rejected: {unknown_id} unknown id, {phase_not_configured} phase not configured"
+        ),
+        StatusPage::Config { checksum } => format!("status    configuration 0x{checksum:08X}"),
     }
 }
 
@@ -599,53 +677,49 @@ pub fn write_summary(log: &DecodedLog, out: &mut dyn Write) -> io::Result<()> {
     )
 }
 
-/// The confidence stream as CSV for plotting: `time,node,seq,event,confidence,unjudgeable`,
-/// one row per evaluated event per page. Rows without a timestamp are written with an
-/// empty time.
+/// The confidence stream as CSV for plotting:
+/// `time,node,sample,event,confidence,level,unjudgeable`, one row per evaluated event per
+/// sample. Rows without a timestamp are written with an empty time.
 pub fn write_confidences_csv(
     log: &DecodedLog,
     opts: &DecodeOptions,
     out: &mut dyn Write,
 ) -> io::Result<()> {
-    writeln!(out, "time,node,seq,event,confidence,unjudgeable")?;
+    writeln!(out, "time,node,sample,event,confidence,level,unjudgeable")?;
     for r in log.records() {
-        if let Message::Confidence(m) = &r.message {
-            for (k, c) in m.confidences.iter().enumerate() {
-                if m.evaluated & (1 << k) == 0 {
-                    continue;
-                }
-                let time = r.time.map(|t| format!("{t:.6}")).unwrap_or_default();
-                writeln!(
-                    out,
-                    "{time},{},{},{},{:.6},{}",
-                    r.node.get(),
-                    m.seq,
-                    opts.event_name(3 * usize::from(m.page) + k),
-                    c.to_f64(),
-                    u8::from(m.unjudgeable & (1 << k) != 0)
-                )?;
-            }
+        let Some(node) = r.node() else { continue };
+        for v in r.stream_values() {
+            let time = r.time.map(|t| format!("{t:.6}")).unwrap_or_default();
+            writeln!(
+                out,
+                "{time},{},{},{},{:.6},{},{}",
+                node.get(),
+                v.sample,
+                opts.event_name(v.event),
+                v.confidence,
+                v.level.name(),
+                u8::from(v.unjudgeable)
+            )?;
         }
     }
     Ok(())
 }
 
-/// The event frames as CSV: `time,node,event,level,confidence,tick,onset_age_s`.
+/// The event frames as CSV: `time,node,event,level,tick,onset_age_s`.
 pub fn write_events_csv(
     log: &DecodedLog,
     opts: &DecodeOptions,
     out: &mut dyn Write,
 ) -> io::Result<()> {
-    writeln!(out, "time,node,event,level,confidence,tick,onset_age_s")?;
+    writeln!(out, "time,node,event,level,tick,onset_age_s")?;
     for (r, m) in log.events() {
         let time = r.time.map(|t| format!("{t:.6}")).unwrap_or_default();
         writeln!(
             out,
-            "{time},{},{},{},{:.6},{},{:.6}",
-            r.node.get(),
+            "{time},{},{},{},{},{:.6}",
+            r.address.index(),
             opts.event_name(usize::from(m.event.0)),
             m.level.name(),
-            m.confidence.to_f64(),
             m.tick,
             f64::from(m.onset_age) / opts.tick_rate_hz
         )?;

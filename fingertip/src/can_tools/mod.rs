@@ -2,12 +2,15 @@
 //! `fingertip monitor` and `fingertip busload` subcommands and `fingertip replay
 //! --candump`.
 //!
-//! - [`candump`]: read candump logs (log and screen formats), write the log format.
+//! - [`candump`]: read candump logs (log and screen formats, classic and CAN FD frames),
+//!   write the log format (`ID##1DATA` for CAN FD).
 //! - [`decode`]: decode a log into confidences, events and status, reporting malformed
 //!   lines, invalid frames (wrong length, bad CRC, out of range) and counter gaps by line.
 //! - [`monitor`]: the same, live, from a SocketCAN interface (Linux).
-//! - [`busload`]: worst-case bus load with bit stuffing and event-frame latency.
-//! - [`dbc`]: the published database `fingertip-can/fingertip.dbc` and its specification.
+//! - [`busload`]: worst-case bus load (CAN FD with bit stuffing in both phases, or classic
+//!   CAN) and event-frame latency.
+//! - [`dbc`]: the published databases `fingertip-can/fingertip.dbc` (CAN FD) and
+//!   `fingertip-classic.dbc`, and their specification.
 //!
 //! The codec itself is `fingertip_can`, shared with the firmware.
 
@@ -22,7 +25,9 @@ pub mod monitor;
 
 pub use busload::{BusConfig, BusReport, analyse, write_report};
 pub use candump::{LogFrame, parse_line, write_log_line};
-pub use decode::{DecodeOptions, DecodedLog, Decoder, Item, LineProblem, Problem, Record};
+pub use decode::{
+    DecodeOptions, DecodedLog, Decoder, Item, LineProblem, Problem, Record, StreamValue,
+};
 pub use decode::{decode_file, decode_reader, write_confidences_csv, write_events_csv};
 
 /// A CAN tool failed (problems inside a log are not failures: they are reported).

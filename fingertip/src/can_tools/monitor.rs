@@ -1,12 +1,13 @@
 //! Live decoding of SocketCAN traffic (Linux): `fingertip monitor --iface can0`.
 //!
-//! Frames are read from a raw CAN socket, timestamped on arrival, decoded exactly as a
-//! log would be (frame numbers stand for line numbers) and printed as they come.
+//! Frames are read from a raw CAN socket in CAN FD mode (so classic and CAN FD frames both
+//! arrive), timestamped on arrival, decoded exactly as a log would be (frame numbers stand
+//! for line numbers) and printed as they come.
 
 use std::io::Write;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use socketcan::{CanFrame as SocketFrame, CanSocket, EmbeddedFrame, ShouldRetry, Socket};
+use socketcan::{CanAnyFrame, CanFdSocket, EmbeddedFrame, ShouldRetry, Socket};
 
 use super::CanToolError;
 use super::candump::{LogFrame, write_log_line};
@@ -22,22 +23,34 @@ pub struct MonitorLimits {
 }
 
 /// Converts a SocketCAN frame into a log frame numbered `n`, timestamped `time` (s).
-pub fn log_frame(frame: &SocketFrame, iface: &str, n: usize, time: f64) -> LogFrame {
-    let (remote, error, data) = match frame {
-        SocketFrame::Data(f) => (false, false, f.data().to_vec()),
-        SocketFrame::Remote(_) => (true, false, Vec::new()),
-        SocketFrame::Error(f) => (false, true, f.data().to_vec()),
-    };
-    LogFrame {
+pub fn log_frame(frame: &CanAnyFrame, iface: &str, n: usize, time: f64) -> LogFrame {
+    let mut f = LogFrame {
         line: n,
         time: Some(time),
         iface: iface.to_string(),
         id: frame.id(),
-        remote,
-        error,
+        remote: false,
+        error: false,
         fd: false,
-        data,
+        brs: false,
+        esi: false,
+        data: Vec::new(),
+    };
+    match frame {
+        CanAnyFrame::Normal(d) => f.data = d.data().to_vec(),
+        CanAnyFrame::Remote(_) => f.remote = true,
+        CanAnyFrame::Error(e) => {
+            f.error = true;
+            f.data = e.data().to_vec();
+        }
+        CanAnyFrame::Fd(d) => {
+            f.fd = true;
+            f.brs = d.is_brs();
+            f.esi = d.is_esi();
+            f.data = d.data().to_vec();
+        }
     }
+    f
 }
 
 /// Reads `iface` until `stop()` returns true or a limit is reached, printing every
@@ -52,7 +65,7 @@ pub fn monitor(
     mut candump: Option<&mut dyn Write>,
     stop: &dyn Fn() -> bool,
 ) -> Result<DecodedLog, CanToolError> {
-    let socket = CanSocket::open(iface).map_err(|e| CanToolError::Socket {
+    let socket = CanFdSocket::open(iface).map_err(|e| CanToolError::Socket {
         iface: iface.to_string(),
         source: e,
     })?;
@@ -78,12 +91,14 @@ pub fn monitor(
             .duration_since(UNIX_EPOCH)
             .unwrap_or_default();
         let lf = log_frame(&frame, iface, n, now.as_secs_f64());
-        if let (Some(w), SocketFrame::Data(_)) = (candump.as_deref_mut(), &frame)
-            && let Some(cf) = fingertip_can::StandardId::new(match lf.id {
-                socketcan::Id::Standard(s) => s.as_raw(),
-                socketcan::Id::Extended(_) => u16::MAX,
-            })
-            .and_then(|id| fingertip_can::CanFrame::new(id, &lf.data))
+        if let (Some(w), socketcan::Id::Standard(id)) = (candump.as_deref_mut(), lf.id)
+            && !lf.remote
+            && !lf.error
+            && let Some(cf) = if lf.fd {
+                fingertip_can::CanFrame::new_fd(id, &lf.data)
+            } else {
+                fingertip_can::CanFrame::new(id, &lf.data)
+            }
         {
             write_log_line(w, now, iface, &cf).map_err(sock_err)?;
         }
