@@ -340,7 +340,7 @@ impl core::fmt::Display for StageError {
 }
 
 /// Slots a stage can read: the channels, then the features.
-pub const MAX_SLOTS: usize = crate::MAX_CHANNELS + crate::MAX_FEATURES;
+pub const MAX_SLOTS: usize = (crate::MAX_CHANNELS + crate::MAX_FEATURES).next_power_of_two();
 
 /// Samples of history the detector holds for all its STE and mean features together.
 pub const WINDOW_POOL: usize = 2 * MAX_WINDOW;

@@ -235,6 +235,11 @@ pub struct LevelState {
 }
 
 impl LevelState {
+    /// Whether the level is up.
+    pub fn is_up(&self) -> bool {
+        self.up
+    }
+
     /// One tick of a level at confidence `q` (Q15): up at `on` after `dwell` ticks in a
     /// row, down below `off` after `hold` ticks in a row. Returns whether the level was
     /// raised at this tick.
