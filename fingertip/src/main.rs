@@ -1292,6 +1292,16 @@ impl Tally {
             "false_alarms": self.free_alarms,
             "false_alarms_per_hour": self.alarms_per_hour(),
             "free_motion_hours": self.free_hours,
+            // Every run that went wrong, with the seed that reproduces it.
+            "failures": self
+                .failures
+                .iter()
+                .map(|(scenario, seed, outcome)| serde_json::json!({
+                    "scenario": scenario.name(),
+                    "seed": seed,
+                    "outcome": outcome.to_string(),
+                }))
+                .collect::<Vec<_>>(),
         })
     }
 }
