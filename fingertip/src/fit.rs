@@ -266,10 +266,13 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                 ),
             });
         }
-        let sum: f64 = strengths.iter().sum();
-        if sum > 0.0 && strengths.len() == event.sensor.len() {
-            for (term, s) in event.sensor.iter_mut().zip(&strengths) {
-                term.weight = round4(f64::from(total) * s / sum);
+        if strengths.iter().sum::<f64>() > 0.0 && strengths.len() == event.sensor.len() {
+            for (term, w) in event
+                .sensor
+                .iter_mut()
+                .zip(shares(f64::from(total), &strengths))
+            {
+                term.weight = round4(w);
             }
             // Rounding may push the sum past the base's: take it off the largest.
             let excess: f32 = event.sensor.iter().map(|t| t.weight).sum::<f32>() - total;
@@ -284,6 +287,42 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
         }
     }
     Ok((config, notes))
+}
+
+/// `total` shared in proportion to `strengths`, no share above 1 (a weight's most): what a
+/// capped share would have had beyond 1 goes to the others, in proportion again.
+fn shares(total: f64, strengths: &[f64]) -> Vec<f64> {
+    let mut out = vec![0.0; strengths.len()];
+    let mut capped = vec![false; strengths.len()];
+    let mut left = total;
+    // Each round caps at least one more share or ends: at most one round per term.
+    for _ in 0..strengths.len() {
+        let open: f64 = strengths
+            .iter()
+            .zip(&capped)
+            .filter(|(_, c)| !**c)
+            .map(|(s, _)| *s)
+            .sum();
+        if open <= 0.0 {
+            break;
+        }
+        let mut capped_now = false;
+        for ((o, s), c) in out.iter_mut().zip(strengths).zip(capped.iter_mut()) {
+            if !*c {
+                *o = left * s / open;
+                if *o > 1.0 {
+                    *o = 1.0;
+                    *c = true;
+                    capped_now = true;
+                }
+            }
+        }
+        if !capped_now {
+            break;
+        }
+        left = total - capped.iter().filter(|c| **c).count() as f64;
+    }
+    out
 }
 
 /// A sensor term: from the end of the outside distribution to what nine in ten of the
@@ -452,11 +491,13 @@ struct Tried {
 /// Replays `file` once with `detector` (the terms fitted), stepping every candidate's
 /// confirm level (`levels[candidate][event]`) on each event's confidence as the detector
 /// steps its own: only while the event is evaluated in the phase, reset when it cannot be
-/// judged or the phase changes.
+/// judged or the phase changes, held down while an event of `excluded_by[event]` has its
+/// confirm level up (events in order, as the detector decides them).
 fn try_levels(
     detector: &Detector,
     file: &PathBuf,
     levels: &[Vec<LevelParams>],
+    excluded_by: &[u8],
 ) -> Result<Tried, FitError> {
     let events = detector.events().len();
     let mut states = vec![vec![LevelState::default(); events]; levels.len()];
@@ -480,9 +521,11 @@ fn try_levels(
             }
             let judged = out.unjudgeable & bit == 0;
             let q = out.confidences[e].to_bits();
+            let mask = excluded_by.get(e).copied().unwrap_or(0);
             for (c, candidate) in levels.iter().enumerate() {
+                let excluded = (0..events).any(|j| mask & (1 << j) != 0 && states[c][j].is_up());
                 let state = &mut states[c][e];
-                if !judged {
+                if !judged || excluded {
                     *state = LevelState::default();
                 } else if state.step(&candidate[e], q) {
                     confirmations[c].push(DecisionRecord {
@@ -575,6 +618,13 @@ pub fn fit_levels(
         .iter()
         .flat_map(|&on| DWELL_MS.iter().map(move |&dwell| (on, dwell)))
         .collect();
+    // The exclusions, the same in every candidate.
+    let excluded_by: Vec<u8> = detector_build::compile(config)
+        .map_err(|e| FitError::Config(e.to_string()))?
+        .events
+        .iter()
+        .map(|e| e.excluded_by)
+        .collect();
     // Each candidate's confirm levels, compiled exactly as the detector would have them.
     let levels: Vec<Vec<LevelParams>> = grid
         .iter()
@@ -596,7 +646,7 @@ pub fn fit_levels(
         .chain(held)
         .collect::<Vec<_>>()
         .par_iter()
-        .map(|f| try_levels(&detector, f, &levels))
+        .map(|f| try_levels(&detector, f, &levels, &excluded_by))
         // In file order, so that the error reported is the first file's.
         .collect::<Vec<_>>()
         .into_iter()
@@ -901,6 +951,21 @@ mod tests {
         assert_eq!(round4(0.000123456), 0.0001235);
         assert_eq!(round4(-98.7654), -98.77);
         assert_eq!(round4(0.0), 0.0);
+    }
+
+    /// Shares follow the strengths, none above 1, what a capped one loses going to the rest.
+    #[test]
+    fn weights_are_shared_and_capped_at_one() {
+        let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
+        assert!(close(&shares(1.0, &[1.0, 3.0]), &[0.25, 0.75]));
+        // Two sufficient terms of a base summing to 2, one much stronger: 1 and 1.
+        assert!(close(&shares(2.0, &[0.1, 0.4]), &[1.0, 1.0]));
+        // Capped at 1, the rest shared 1 : 2.
+        assert!(close(
+            &shares(2.0, &[4.0, 1.0, 2.0]),
+            &[1.0, 1.0 / 3.0, 2.0 / 3.0]
+        ));
+        assert!(close(&shares(1.5, &[0.0, 1.0]), &[0.0, 1.0]));
     }
 
     /// A feature saturated in the corpus (±32768) still gives bounds a sigmoid takes.

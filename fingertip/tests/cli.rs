@@ -207,8 +207,8 @@ fn evaluate_compares_configurations_on_the_same_runs() {
 
 /// `identify` finds, in simulated free motion, the fingertip's inertia on the force sensor:
 /// a gain of about minus its mass (20-45 g plus the skin) in the approach configuration's
-/// units (20 mN per m/s^2), printed as a `cancel` stage ready to paste; a channel the trace
-/// does not have is named.
+/// units (cN per m/s^2, i.e. tens of grams), printed as a `cancel` stage ready to paste; a
+/// channel the trace does not have is named.
 #[test]
 fn identify_finds_the_fingertip_inertia_in_free_motion() {
     let dir = scratch("identify");
@@ -239,7 +239,7 @@ fn identify_finds_the_fingertip_inertia_in_free_motion() {
         .and_then(|rest| rest.split(',').next())
         .and_then(|g| g.trim().parse().ok())
         .unwrap_or_else(|| panic!("no cancel stage in {stdout}"));
-    assert!((-3.0..=-1.0).contains(&gain), "gain {gain} in {stdout}");
+    assert!((-6.0..=-2.0).contains(&gain), "gain {gain} in {stdout}");
     assert!(
         stdout.contains("input = \"force_x\", motion = \"acc_des_x\""),
         "{stdout}"
@@ -771,12 +771,9 @@ fn features_show_what_separates_each_event() {
     let separations = report["separations"].as_array().expect("a list");
     let stress = separations
         .iter()
-        .find(|s| s["feature"] == "ste_stress" && s["event"] == "contact")
-        .expect("ste_stress judged against the contact");
-    assert!(
-        stress["balanced_accuracy"].as_f64() > Some(0.95),
-        "{stress}"
-    );
+        .find(|s| s["feature"] == "press" && s["event"] == "contact")
+        .expect("press judged against the contact");
+    assert!(stress["balanced_accuracy"].as_f64() > Some(0.9), "{stress}");
     assert_eq!(stress["above"], true);
     // 20 ms at 5 kHz after the contact's onset (both ends counted).
     assert_eq!(stress["n_event"].as_u64(), Some(101));
@@ -808,7 +805,7 @@ fn fit_writes_a_configuration_that_runs() {
     let corpus = dir.join("corpus");
     std::fs::create_dir_all(&corpus).expect("corpus dir");
     for scenario in ["contact_hard_8", "disturbance_large_5"] {
-        for seed in 9..=12 {
+        for seed in 1..=4 {
             let path = corpus.join(format!("{scenario}_{seed}.csv"));
             let out = fingertip(&[
                 "simulate",
@@ -885,8 +882,8 @@ fn fit_writes_a_configuration_that_runs() {
     // A contact judged by the commanded acceleration alone: it cannot tell contacts apart.
     let bad = dir.join("bad.toml");
     let replaced = base.replacen(
-        "{ feature = \"ste_stress\", weight = 0.75",
-        "{ feature = \"acc_des\", weight = 0.75",
+        "{ feature = \"press_fast\", weight = 1.0",
+        "{ feature = \"acc_des\", weight = 1.0",
         1,
     );
     assert_ne!(replaced, base);
