@@ -562,7 +562,7 @@ fn bad_configurations_are_rejected_clearly() {
     rejects(
         &trace,
         Some(&unknown),
-        &["config.toml", "feature 'force_ac'", "force_z"],
+        &["config.toml", "feature 'force_ext'", "force_z"],
     );
     rejects(
         &trace,
