@@ -502,6 +502,9 @@ fn try_levels(
     let events = detector.events().len();
     let mut states = vec![vec![LevelState::default(); events]; levels.len()];
     let mut confirmations = vec![Vec::new(); levels.len()];
+    // Per event: every candidate's level down and counting nothing, so that a tick at
+    // confidence 0 (most of a recording) changes none of them and can be passed over.
+    let mut idle = vec![true; events];
     let mut phase = None;
     let reader = TraceReader::open(file).map_err(StreamError::from)?;
     let name = reader.name().to_string();
@@ -512,6 +515,7 @@ fn try_levels(
                 .iter_mut()
                 .flatten()
                 .for_each(|s| *s = LevelState::default());
+            idle.iter_mut().for_each(|i| *i = true);
         }
         let out = tick.output;
         for e in 0..events {
@@ -521,7 +525,11 @@ fn try_levels(
             }
             let judged = out.unjudgeable & bit == 0;
             let q = out.confidences[e].to_bits();
+            if idle[e] && (q == 0 || !judged) {
+                continue;
+            }
             let mask = excluded_by.get(e).copied().unwrap_or(0);
+            idle[e] = true;
             for (c, candidate) in levels.iter().enumerate() {
                 let excluded = (0..events).any(|j| mask & (1 << j) != 0 && states[c][j].is_up());
                 let state = &mut states[c][e];
@@ -536,6 +544,7 @@ fn try_levels(
                         t_s: tick.t,
                     });
                 }
+                idle[e] &= *state == LevelState::default();
             }
         }
     })?;
