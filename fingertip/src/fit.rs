@@ -7,7 +7,7 @@
 //! values into the first `window` of each labelled event and the time outside events):
 //!
 //! - **Sensor terms** (evidence for the event): a rising sigmoid from where the time
-//!   outside events ends (its 99.9 % quantile, over the ticks the event's base context
+//!   outside events ends (its 99.999 % quantile, over the ticks the event's base context
 //!   lets through) to what nine in ten of the event's occurrences reach in the window (the
 //!   10 % quantile of their peaks); falling, mirrored, when the base's is. A term whose feature does not
 //!   separate the event (balanced accuracy of the best single threshold below
@@ -336,9 +336,9 @@ fn fit_sensor(
     (threshold, above): (f64, bool),
 ) -> (CdfSpec, String) {
     if !falling {
-        let mut low = quantile(outside, 0.999);
+        let mut low = quantile(outside, 0.99999);
         let mut high = quantile(reached, 0.1);
-        let mut how = "from the 99.9 % quantile outside events to what 90 % of the events reach";
+        let mut how = "from the 99.999 % quantile outside events to what 90 % of the events reach";
         if high <= low + gap(low, high) {
             // Most events peak inside the outside tail: start where one threshold
             // separates best and end where most of the event is.
@@ -356,7 +356,7 @@ fn fit_sensor(
             format!("rising {low}..{high}, {how}"),
         )
     } else {
-        let mut high = quantile(outside, 0.001);
+        let mut high = quantile(outside, 0.00001);
         let mut low = quantile(reached, 0.9);
         let mut how =
             "falling from what 90 % of the events reach to the 0.1 % quantile outside events";
@@ -477,83 +477,151 @@ fn build(config: &Config) -> Result<Detector, FitError> {
     detector_build::build(config).map_err(|e| FitError::Config(e.to_string()))
 }
 
-/// Every candidate's confirmations on one recording, with the recording's labels: the
-/// confidences are those of the terms fitted, the candidates' confirm levels each run on
-/// them with the detector's own level state.
+/// One tick of a recording as the fitted terms judged it.
+#[derive(Clone, Copy)]
+struct Judged {
+    t: f64,
+    phase: u8,
+    /// The events evaluated in the phase, and of those the ones that could be judged.
+    evaluated: u8,
+    judged: u8,
+    confidences: [u16; detector_core::MAX_EVENTS],
+}
+
+/// A recording replayed once: its ticks that can move a decision level (an event with a
+/// confidence above 0, or the phase or the events evaluated or judged changing), each
+/// after the count of ticks since the one before, ticks at confidence 0 with the same
+/// phase and events as it.
+struct Recorded {
+    name: String,
+    span: (f64, f64),
+    labelled: Vec<crate::replay::Labelled>,
+    ticks: Vec<(u32, Judged)>,
+}
+
+impl Recorded {
+    /// Replays `file` with `detector` (the terms fitted) and keeps what the levels need.
+    fn replay(detector: &Detector, file: &PathBuf) -> Result<Recorded, FitError> {
+        let events = detector.events().len();
+        let mut ticks = Vec::new();
+        let mut gap = 0u32;
+        let reader = TraceReader::open(file).map_err(StreamError::from)?;
+        let name = reader.name().to_string();
+        let streamed = replay_stream(detector, reader, |tick| {
+            let out = tick.output;
+            let mut judged = Judged {
+                t: tick.t,
+                phase: tick.state.phase().index(),
+                evaluated: out.evaluated,
+                judged: out.evaluated & !out.unjudgeable,
+                confidences: [0; detector_core::MAX_EVENTS],
+            };
+            for (e, q) in judged.confidences.iter_mut().enumerate().take(events) {
+                if judged.judged & (1 << e) != 0 {
+                    *q = out.confidences[e].to_bits();
+                }
+            }
+            let same = ticks.last().is_some_and(|(_, last): &(u32, Judged)| {
+                (last.phase, last.evaluated, last.judged)
+                    == (judged.phase, judged.evaluated, judged.judged)
+            });
+            if same && judged.confidences.iter().all(|&q| q == 0) {
+                gap += 1;
+            } else {
+                ticks.push((gap, judged));
+                gap = 0;
+            }
+        })?;
+        Ok(Recorded {
+            name,
+            span: streamed.span_s,
+            labelled: streamed.labelled,
+            ticks,
+        })
+    }
+
+    /// The confirmations each set of confirm levels (`sets[set][event]`) raises on these
+    /// confidences, stepped as the detector steps its own: only while the event is
+    /// evaluated, reset when it cannot be judged or the phase changes, held down while an
+    /// event of `excluded_by[event]` has its confirm level up (events in order, as the
+    /// detector decides them).
+    fn confirmations(
+        &self,
+        sets: &[Vec<LevelParams>],
+        excluded_by: &[u8],
+        names: &[String],
+    ) -> Vec<Vec<DecisionRecord>> {
+        let events = names.len();
+        let mut states = vec![vec![LevelState::default(); events]; sets.len()];
+        let mut raised = vec![Vec::new(); sets.len()];
+        // Per event: every set's level down and counting nothing, so that a tick at
+        // confidence 0 changes none of them.
+        let mut idle = vec![true; events];
+        let mut last: Option<Judged> = None;
+        let mut step = |tick: &Judged, states: &mut Vec<Vec<LevelState>>, idle: &mut Vec<bool>| {
+            for e in 0..events {
+                let bit = 1u8 << e;
+                let q = tick.confidences[e];
+                if tick.evaluated & bit == 0 || (idle[e] && q == 0) {
+                    continue;
+                }
+                let judged = tick.judged & bit != 0;
+                let mask = excluded_by.get(e).copied().unwrap_or(0);
+                idle[e] = true;
+                for (c, set) in sets.iter().enumerate() {
+                    let excluded =
+                        (0..events).any(|j| mask & (1 << j) != 0 && states[c][j].is_up());
+                    let state = &mut states[c][e];
+                    if !judged || excluded {
+                        *state = LevelState::default();
+                    } else if state.step(&set[e], q) {
+                        raised[c].push(DecisionRecord {
+                            event: names[e].clone(),
+                            level: detector_core::Level::Confirm.name(),
+                            confidence: f64::from(q) / 32768.0,
+                            onset_s: tick.t,
+                            t_s: tick.t,
+                        });
+                    }
+                    idle[e] &= *state == LevelState::default();
+                }
+            }
+        };
+        for (gap, tick) in &self.ticks {
+            if let Some(before) = last {
+                // The ticks at confidence 0 since: they move a level only until it is idle.
+                let quiet = Judged {
+                    confidences: [0; detector_core::MAX_EVENTS],
+                    ..before
+                };
+                for _ in 0..*gap {
+                    if idle.iter().all(|i| *i) {
+                        break;
+                    }
+                    step(&quiet, &mut states, &mut idle);
+                }
+                if before.phase != tick.phase {
+                    states
+                        .iter_mut()
+                        .flatten()
+                        .for_each(|s| *s = LevelState::default());
+                    idle.iter_mut().for_each(|i| *i = true);
+                }
+            }
+            step(tick, &mut states, &mut idle);
+            last = Some(*tick);
+        }
+        raised
+    }
+}
+
+/// Every set of levels' confirmations on one recording, with the recording's labels.
 struct Tried {
     name: String,
     span: (f64, f64),
     labelled: Vec<crate::replay::Labelled>,
-    /// `[candidate]`: the confirmations that candidate raises.
+    /// `[set]`: the confirmations that set of levels raises.
     confirmations: Vec<Vec<DecisionRecord>>,
-}
-
-/// Replays `file` once with `detector` (the terms fitted), stepping every candidate's
-/// confirm level (`levels[candidate][event]`) on each event's confidence as the detector
-/// steps its own: only while the event is evaluated in the phase, reset when it cannot be
-/// judged or the phase changes, held down while an event of `excluded_by[event]` has its
-/// confirm level up (events in order, as the detector decides them).
-fn try_levels(
-    detector: &Detector,
-    file: &PathBuf,
-    levels: &[Vec<LevelParams>],
-    excluded_by: &[u8],
-) -> Result<Tried, FitError> {
-    let events = detector.events().len();
-    let mut states = vec![vec![LevelState::default(); events]; levels.len()];
-    let mut confirmations = vec![Vec::new(); levels.len()];
-    // Per event: every candidate's level down and counting nothing, so that a tick at
-    // confidence 0 (most of a recording) changes none of them and can be passed over.
-    let mut idle = vec![true; events];
-    let mut phase = None;
-    let reader = TraceReader::open(file).map_err(StreamError::from)?;
-    let name = reader.name().to_string();
-    let streamed = replay_stream(detector, reader, |tick| {
-        let now = tick.state.phase();
-        if phase.replace(now).is_some_and(|p| p != now) {
-            states
-                .iter_mut()
-                .flatten()
-                .for_each(|s| *s = LevelState::default());
-            idle.iter_mut().for_each(|i| *i = true);
-        }
-        let out = tick.output;
-        for e in 0..events {
-            let bit = 1u8 << e;
-            if out.evaluated & bit == 0 {
-                continue;
-            }
-            let judged = out.unjudgeable & bit == 0;
-            let q = out.confidences[e].to_bits();
-            if idle[e] && (q == 0 || !judged) {
-                continue;
-            }
-            let mask = excluded_by.get(e).copied().unwrap_or(0);
-            idle[e] = true;
-            for (c, candidate) in levels.iter().enumerate() {
-                let excluded = (0..events).any(|j| mask & (1 << j) != 0 && states[c][j].is_up());
-                let state = &mut states[c][e];
-                if !judged || excluded {
-                    *state = LevelState::default();
-                } else if state.step(&candidate[e], q) {
-                    confirmations[c].push(DecisionRecord {
-                        event: detector.events()[e].to_string(),
-                        level: detector_core::Level::Confirm.name(),
-                        confidence: out.confidences[e].to_f64(),
-                        onset_s: tick.t,
-                        t_s: tick.t,
-                    });
-                }
-                idle[e] &= *state == LevelState::default();
-            }
-        }
-    })?;
-    Ok(Tried {
-        name,
-        span: streamed.span_s,
-        labelled: streamed.labelled,
-        confirmations,
-    })
 }
 
 /// A level candidate's figures for one event: events right less the other events' windows
@@ -609,11 +677,32 @@ fn tally(tried: &[Tried], choice: &[usize], events: &[String], after_s: f64) -> 
     CorpusReport::tally(events, &results, after_s * 1e3)
 }
 
+/// Every set of levels' confirmations on each recording.
+fn try_sets(
+    recorded: &[Recorded],
+    sets: &[Vec<LevelParams>],
+    excluded_by: &[u8],
+    names: &[String],
+) -> Vec<Tried> {
+    recorded
+        .par_iter()
+        .map(|r| Tried {
+            name: r.name.clone(),
+            span: r.span,
+            labelled: r.labelled.clone(),
+            confirmations: r.confirmations(sets, excluded_by, names),
+        })
+        .collect()
+}
+
 /// Chooses every labelled event's confirm level and dwell on `train`: the most events
 /// right less the other events' windows it confirms in, its false confirmations within its
-/// share of the budget. One replay per recording, of `train` and `held` alike: the
-/// candidates' levels all run on the same confidences, and the levels chosen on `train`
-/// are scored on both.
+/// share of the budget, then the shortest median latency. Each recording is replayed once
+/// with the fitted terms; every candidate runs on the confidences kept: first the grid's
+/// candidates for all labelled events at once, each event choosing its own; then, when
+/// events hold each other down (`excludes`), so that one event's levels change how the
+/// others fare, each event's candidates again beside the others' first choices. The levels
+/// chosen are scored on `train` and on `held`.
 pub fn fit_levels(
     config: &Config,
     train: &[PathBuf],
@@ -627,77 +716,113 @@ pub fn fit_levels(
         .iter()
         .flat_map(|&on| DWELL_MS.iter().map(move |&dwell| (on, dwell)))
         .collect();
-    // The exclusions, the same in every candidate.
-    let excluded_by: Vec<u8> = detector_build::compile(config)
-        .map_err(|e| FitError::Config(e.to_string()))?
-        .events
-        .iter()
-        .map(|e| e.excluded_by)
-        .collect();
+    let compiled = detector_build::compile(config).map_err(|e| FitError::Config(e.to_string()))?;
+    // The exclusions and the base's levels, the same in every candidate.
+    let excluded_by: Vec<u8> = compiled.events.iter().map(|e| e.excluded_by).collect();
+    let base_levels: Vec<LevelParams> = compiled.events.iter().map(|e| e.levels[1]).collect();
     // Each candidate's confirm levels, compiled exactly as the detector would have them.
-    let levels: Vec<Vec<LevelParams>> = grid
+    let candidates: Vec<Vec<LevelParams>> = grid
         .iter()
         .map(|&(on, dwell)| {
             let mut c = config.clone();
             for e in &mut c.events {
-                if labelled.contains(&e.name) {
-                    *e = with_levels(e, on, dwell);
-                }
+                *e = with_levels(e, on, dwell);
             }
             detector_build::compile(&c)
                 .map(|compiled| compiled.events.iter().map(|e| e.levels[1]).collect())
                 .map_err(|e| FitError::Config(e.to_string()))
         })
         .collect::<Result<_, _>>()?;
+    let labelled_index: Vec<usize> = (0..names.len())
+        .filter(|&k| labelled.contains(&names[k]))
+        .collect();
+    // A set of levels: the chosen candidate for each labelled event, the base's for the rest.
+    let set_of = |choice: &[usize]| -> Vec<LevelParams> {
+        (0..names.len())
+            .map(|e| {
+                if labelled_index.contains(&e) {
+                    candidates[choice[e]][e]
+                } else {
+                    base_levels[e]
+                }
+            })
+            .collect()
+    };
     let detector = build(config)?;
-    let mut tried: Vec<Tried> = train
+    // Every recording replayed once; the levels then run on what it kept.
+    let mut recorded: Vec<Recorded> = train
         .iter()
         .chain(held)
         .collect::<Vec<_>>()
         .par_iter()
-        .map(|f| try_levels(&detector, f, &levels, &excluded_by))
+        .map(|f| Recorded::replay(&detector, f))
         // In file order, so that the error reported is the first file's.
         .collect::<Vec<_>>()
         .into_iter()
         .collect::<Result<_, _>>()?;
-    let held_tried = tried.split_off(train.len());
-    let mut best: Vec<Option<Candidate>> = vec![None; names.len()];
+    let held_recorded = recorded.split_off(train.len());
     let mut outside_hours = 0.0;
-    for c in 0..grid.len() {
-        let report = tally(&tried, &vec![c; names.len()], &names, options.after_s);
-        outside_hours = report.outside_hours;
-        let within = |false_count: usize| {
-            outside_hours <= 0.0 || (false_count as f64 / outside_hours) <= share
-        };
-        for (k, name) in names.iter().enumerate() {
-            if !labelled.contains(name) {
-                continue;
-            }
-            let tally = report.events.iter().find(|r| r.name == *name);
-            // Confirming this event in another's window costs what one right gains.
-            let right = tally.map_or(0, |r| r.correct) as i64
-                - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
-            let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
-            let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
-            let better = match best[k] {
-                None => true,
-                Some((r, f, l, _)) => {
-                    let (now, was) = (
-                        (within(false_count), right, std::cmp::Reverse(false_count)),
-                        (within(f), r, std::cmp::Reverse(f)),
-                    );
-                    now > was || (now == was && latency < l)
+    // For each labelled event, the best of the sets `set_for(event, candidate)` names.
+    let mut choose = |tried: &[Tried], set_for: &dyn Fn(usize, usize) -> usize| {
+        let mut best: Vec<Option<Candidate>> = vec![None; names.len()];
+        let mut reports = std::collections::HashMap::new();
+        for &k in &labelled_index {
+            for c in 0..grid.len() {
+                let set = set_for(k, c);
+                let report = reports.entry(set).or_insert_with(|| {
+                    tally(tried, &vec![set; names.len()], &names, options.after_s)
+                });
+                outside_hours = report.outside_hours;
+                let within = |false_count: usize| {
+                    outside_hours <= 0.0 || (false_count as f64 / outside_hours) <= share
+                };
+                let tally = report.events.iter().find(|r| r.name == names[k]);
+                // Confirming this event in another's window costs what one right gains.
+                let right = tally.map_or(0, |r| r.correct) as i64
+                    - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
+                let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
+                let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
+                let better = match best[k] {
+                    None => true,
+                    Some((r, f, l, _)) => {
+                        let (now, was) = (
+                            (within(false_count), right, std::cmp::Reverse(false_count)),
+                            (within(f), r, std::cmp::Reverse(f)),
+                        );
+                        now > was || (now == was && latency < l)
+                    }
+                };
+                if better {
+                    best[k] = Some((right, false_count, latency, c));
                 }
-            };
-            if better {
-                best[k] = Some((right, false_count, latency, c));
             }
         }
+        best
+    };
+    // Round one: the grid's candidates, all labelled events at once.
+    let uniform: Vec<Vec<LevelParams>> = (0..grid.len())
+        .map(|c| set_of(&vec![c; names.len()]))
+        .collect();
+    let tried = try_sets(&recorded, &uniform, &excluded_by, &names);
+    let mut best = choose(&tried, &|_, c| c);
+    let first: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
+    if excluded_by.iter().any(|m| *m != 0) && labelled_index.len() > 1 {
+        // Round two: each event's candidates beside the others' first choices.
+        let mut sets = Vec::new();
+        for &k in &labelled_index {
+            for c in 0..grid.len() {
+                let mut choice = first.clone();
+                choice[k] = c;
+                sets.push(set_of(&choice));
+            }
+        }
+        let tried = try_sets(&recorded, &sets, &excluded_by, &names);
+        let slot = |k: usize| labelled_index.iter().position(|&e| e == k).unwrap_or(0);
+        best = choose(&tried, &|k, c| slot(k) * grid.len() + c);
     }
+    let choice: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
     let mut fitted = config.clone();
     let mut notes = Vec::new();
-    // Events not labelled run the same levels in every candidate.
-    let choice: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
     for (event, b) in fitted.events.iter_mut().zip(&best) {
         if let Some((right, false_count, latency, c)) = *b {
             let (on, dwell) = grid[c];
@@ -711,9 +836,14 @@ pub fn fit_levels(
             });
         }
     }
+    // The levels chosen, as they are, on the recordings fitted and held out.
+    let chosen = [set_of(&choice)];
+    let scored = try_sets(&recorded, &chosen, &excluded_by, &names);
+    let held_scored = try_sets(&held_recorded, &chosen, &excluded_by, &names);
+    let only = vec![0; names.len()];
     Ok(Fitted {
-        trained: tally(&tried, &choice, &names, options.after_s),
-        held: tally(&held_tried, &choice, &names, options.after_s),
+        trained: tally(&scored, &only, &names, options.after_s),
+        held: tally(&held_scored, &only, &names, options.after_s),
         config: fitted,
         notes,
     })
@@ -962,6 +1092,50 @@ mod tests {
         assert_eq!(round4(0.0), 0.0);
     }
 
+    /// Levels run on a recording's kept ticks as on every tick: the quiet ticks between two
+    /// kept ones let a raised level fall (its hold of 3 ticks passes in a gap of 5), so the
+    /// second rise confirms again; a gap shorter than the hold does not; an event that
+    /// excludes another holds it down.
+    #[test]
+    fn kept_ticks_with_their_gaps_step_levels_as_every_tick_would() {
+        let tick = |t: f64, q: [u16; 2]| {
+            let mut confidences = [0; detector_core::MAX_EVENTS];
+            confidences[..2].copy_from_slice(&q);
+            Judged {
+                t,
+                phase: 0,
+                evaluated: 0b11,
+                judged: 0b11,
+                confidences,
+            }
+        };
+        let high = 30_000;
+        let recorded = |gap: u32| Recorded {
+            name: "r".into(),
+            span: (0.0, 1.0),
+            labelled: Vec::new(),
+            ticks: vec![
+                (0, tick(0.0, [high, 0])),
+                (0, tick(0.001, [0, 0])),
+                (gap, tick(0.1, [high, high])),
+            ],
+        };
+        let level = LevelParams::checked(16_384, 8_192, 1, 3);
+        let names = vec!["a".to_string(), "b".to_string()];
+        let raised = |r: &Recorded, excluded_by: &[u8]| -> Vec<(String, f64)> {
+            r.confirmations(&[vec![level, level]], excluded_by, &names)[0]
+                .iter()
+                .map(|d| (d.event.clone(), d.t_s))
+                .collect()
+        };
+        let a = |t: f64| ("a".to_string(), t);
+        let b = |t: f64| ("b".to_string(), t);
+        assert_eq!(raised(&recorded(5), &[0, 0]), [a(0.0), a(0.1), b(0.1)]);
+        assert_eq!(raised(&recorded(1), &[0, 0]), [a(0.0), b(0.1)]);
+        // `a` excludes `b`: while `a` is up, `b` is held down.
+        assert_eq!(raised(&recorded(1), &[0, 0b01]), [a(0.0)]);
+    }
+
     /// Shares follow the strengths, none above 1, what a capped one loses going to the rest.
     #[test]
     fn weights_are_shared_and_capped_at_one() {
@@ -1011,7 +1185,7 @@ mod tests {
         assert_eq!(
             cdf,
             CdfSpec::Sigmoid {
-                low: 9.98,
+                low: 9.99,
                 high: 60.0,
                 falling: false
             }
