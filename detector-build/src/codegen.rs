@@ -172,13 +172,17 @@ impl Compiled {
     /// Marks event `i` unjudgeable or degraded by the tick's faults, as the interpreter
     /// does.
     fn write_fault_judgement(&self, w: &mut String, i: usize, e: &Event) {
-        let faulty: Vec<String> = e
+        // Each distinct set of channels once: terms reading the same channels fail together.
+        let mut masks: Vec<_> = e
             .sensor
             .iter()
-            .map(|t| {
-                let ch = self.psis.get(usize::from(t.psi)).map_or(0, |p| p.channels);
-                format!("faults & {ch:#x} != 0")
-            })
+            .map(|t| self.psis.get(usize::from(t.psi)).map_or(0, |p| p.channels))
+            .collect();
+        masks.sort_unstable();
+        masks.dedup();
+        let faulty: Vec<String> = masks
+            .iter()
+            .map(|ch| format!("faults & {ch:#x} != 0"))
             .collect();
         let all_faulty = if faulty.is_empty() {
             String::from("true")

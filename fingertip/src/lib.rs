@@ -18,6 +18,34 @@ pub mod trace;
 /// of every tool, and the firmware's (built from the same file).
 pub const APPROACH_TOML: &str = include_str!("../../configs/approach.toml");
 
+/// The default detector's tick, generated from `configs/approach.toml` at build time as
+/// the firmware's is: replays run it instead of the interpreter whenever the detector they
+/// were given is the default one.
+pub mod builtin {
+    use std::sync::OnceLock;
+
+    use detector_core::Detector;
+
+    mod generated {
+        #![allow(missing_docs, clippy::all)]
+        include!(concat!(env!("OUT_DIR"), "/approach_tick.rs"));
+    }
+    pub use generated::ApproachTick;
+
+    /// Whether `detector` is the default detector, which [`ApproachTick`] runs.
+    pub fn is_default(detector: &Detector) -> bool {
+        static DEFAULT: OnceLock<Option<Detector>> = OnceLock::new();
+        DEFAULT
+            .get_or_init(|| {
+                detector_build::Config::from_toml(super::APPROACH_TOML)
+                    .ok()
+                    .and_then(|c| detector_build::build(&c).ok())
+            })
+            .as_ref()
+            .is_some_and(|d| d == detector)
+    }
+}
+
 /// A number as a person reads it in a message: plain in the everyday range, in scientific
 /// notation far outside it, so that a huge input is never echoed with 300 digits.
 pub fn readable(v: f64) -> String {

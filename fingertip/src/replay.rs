@@ -1,6 +1,6 @@
 //! Runs the fixed-point detector — the same code as on the chip — over a trace.
 
-use detector_core::{Detector, Inputs, Level, Output, PhaseId, State, Tick};
+use detector_core::{Detector, DetectorTick, Inputs, Level, Output, PhaseId, State, Tick};
 
 use crate::trace::{ReadAhead, Trace, TraceError, TraceReader};
 
@@ -226,13 +226,22 @@ pub fn channel_columns<'t>(
 pub fn replay(
     detector: &Detector,
     trace: &Trace,
+    each_tick: impl FnMut(usize, &State, &Output),
+) -> Result<Vec<DecisionRecord>, ReplayError> {
+    replay_with(Ticker::new(detector), detector, trace, each_tick)
+}
+
+/// [`replay`] with the given ticker.
+fn replay_with(
+    mut ticker: Ticker,
+    detector: &Detector,
+    trace: &Trace,
     mut each_tick: impl FnMut(usize, &State, &Output),
 ) -> Result<Vec<DecisionRecord>, ReplayError> {
     let columns = channel_columns(detector, trace)?;
     check_rate(detector, trace.name(), trace.rate_hz())?;
     let mut rules = RowRules::new(detector, trace.name());
     let t = trace.time();
-    let mut ticker = Ticker::new(detector);
     for row in 0..t.len() {
         let line = trace.line_of(row);
         if let Some(p) = trace.phase().and_then(|p| p.get(row)) {
@@ -242,13 +251,13 @@ pub fn replay(
         if let Some(label) = trace.truth().and_then(|l| l.get(row)) {
             rules.truth(label, t[row], line)?;
         }
-        let out = ticker.tick(
+        ticker.tick(
             detector,
             row,
             |k| columns.get(k).and_then(|c| c.get(row)).copied(),
             |tick| t.get(tick as usize).copied().unwrap_or(f64::NAN),
         );
-        each_tick(row, &ticker.state, &out);
+        each_tick(row, &ticker.state, &ticker.out);
     }
     Ok(ticker.records)
 }
@@ -357,7 +366,7 @@ fn replay_rows(
             rules.truth(label, r.t, r.line)?;
         }
         let values = r.values;
-        let out = ticker.tick(
+        ticker.tick(
             detector,
             row,
             |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
@@ -367,7 +376,7 @@ fn replay_rows(
             t: r.t,
             row,
             state: &ticker.state,
-            output: &out,
+            output: &ticker.out,
             labelled: &rules.labelled,
             in_event: rules.open,
         });
@@ -429,11 +438,16 @@ pub enum StreamError {
     },
 }
 
-/// The detector's state and inputs across ticks, and the levels raised so far.
+/// The detector's state and inputs across ticks, the last tick's output, and the levels
+/// raised so far.
 struct Ticker {
     state: State,
     inputs: Inputs,
+    out: Output,
     records: Vec<DecisionRecord>,
+    /// The detector is the default one: its generated tick runs, bit for bit the
+    /// interpreter's.
+    generated: bool,
 }
 
 impl Ticker {
@@ -441,7 +455,9 @@ impl Ticker {
         Ticker {
             state: detector.new_state(),
             inputs: Inputs::default(),
+            out: Output::default(),
             records: Vec::new(),
+            generated: crate::builtin::is_default(detector),
         }
     }
 
@@ -453,7 +469,7 @@ impl Ticker {
         row: usize,
         sample: impl Fn(usize) -> Option<f64>,
         time_of: impl Fn(Tick) -> f64,
-    ) -> Output {
+    ) {
         for (k, s) in self
             .inputs
             .samples
@@ -463,8 +479,13 @@ impl Ticker {
         {
             *s = detector.sample_from_si(k, sample(k).unwrap_or(0.0));
         }
-        let out = detector.tick(&mut self.state, row as Tick, &self.inputs);
-        for d in &out.decisions {
+        let tick: &dyn DetectorTick = if self.generated {
+            &crate::builtin::ApproachTick
+        } else {
+            detector
+        };
+        tick.tick_into(&mut self.state, row as Tick, &self.inputs, &mut self.out);
+        for d in &self.out.decisions {
             self.records.push(DecisionRecord {
                 event: detector
                     .events()
@@ -477,7 +498,6 @@ impl Ticker {
                 t_s: time_of(d.tick),
             });
         }
-        out
     }
 }
 
@@ -649,6 +669,55 @@ mod stream_tests {
                 .truth_onset()
                 .map(|(row, e)| (e.to_string(), trace.time()[row]));
             assert_eq!(streamed.first_truth(), truth);
+        }
+    }
+
+    /// The default detector runs its generated tick, and that tick leaves the same state
+    /// and output as the interpreter at every tick of a run of each kind; any other
+    /// detector is interpreted.
+    #[test]
+    fn the_default_detector_runs_generated_and_bit_for_bit_interpreted() {
+        let detector = approach();
+        assert!(Ticker::new(&detector).generated);
+        let paper = detector_build::Config::from_toml(include_str!("../../configs/paper.toml"))
+            .expect("parses");
+        assert!(!Ticker::new(&detector_build::build(&paper).expect("builds")).generated);
+        for scenario in [
+            Scenario::ContactSoft2,
+            Scenario::LinkCollision2,
+            Scenario::DisturbanceLarge5,
+            Scenario::FreeMotion,
+        ] {
+            let opts = SimOptions {
+                seed: 5,
+                randomize: true,
+                duration_s: (scenario == Scenario::FreeMotion).then_some(2.0),
+                ..SimOptions::default()
+            };
+            let trace = sim::simulate(&scenario, &opts).expect("simulates");
+            let mut ticks = Vec::new();
+            let generated = replay(&detector, &trace, |_, state, out| {
+                ticks.push((state.clone(), out.clone()));
+            })
+            .expect("replays");
+            let mut interpreter = Ticker::new(&detector);
+            interpreter.generated = false;
+            let mut row = 0;
+            let interpreted = replay_with(interpreter, &detector, &trace, |_, state, out| {
+                assert_eq!(
+                    ticks.get(row),
+                    Some(&(state.clone(), out.clone())),
+                    "{scenario} row {row}"
+                );
+                row += 1;
+            })
+            .expect("replays");
+            assert_eq!(row, trace.len());
+            assert_eq!(generated.len(), interpreted.len(), "{scenario}");
+            assert!(
+                !generated.is_empty() || scenario == Scenario::FreeMotion,
+                "{scenario}"
+            );
         }
     }
 
