@@ -227,13 +227,15 @@ impl<'a> Sender<'a> {
         self.sent >= self.message.len()
     }
 
-    /// A frame from the receiver at `now_us`: a flow control. Anything else is an error
+    /// A frame from the receiver at `now_us`: a flow control. A flow control that comes
+    /// while none is awaited is ignored (as ISO 15765-2 says); anything else is an error
     /// that ends the transfer.
     pub fn on_flow(&mut self, data: &[u8], now_us: u64) -> Result<(), TransferError> {
+        let flow = Flow::read(data).ok_or(TransferError::Malformed)?;
         if self.is_done() || self.block_left.is_some() {
-            return Err(TransferError::Malformed);
+            return Ok(());
         }
-        match Flow::read(data).ok_or(TransferError::Malformed)? {
+        match flow {
             Flow::Continue {
                 block_size,
                 st_min_us,
@@ -614,6 +616,24 @@ mod tests {
             tx.on_flow(wait.data(), u64::from(k) * 1000).unwrap();
         }
         assert_eq!(tx.on_flow(wait.data(), 99_000), Err(TransferError::Refused));
+    }
+
+    #[test]
+    fn a_flow_control_not_awaited_is_ignored() {
+        let m = [4u8; 300];
+        let (mut tx, _) = Sender::new(&m, 0).unwrap();
+        let go = Flow::Continue {
+            block_size: 0,
+            st_min_us: 0,
+        }
+        .payload();
+        tx.on_flow(go.data(), 0).unwrap();
+        assert!(tx.poll(0).unwrap().is_some());
+        // Sending: another flow control (say, a corrupted block size made the sender
+        // send on) changes nothing; a frame that is no flow control ends the transfer.
+        assert_eq!(tx.on_flow(Flow::Wait.payload().data(), 1), Ok(()));
+        assert!(tx.poll(1).unwrap().is_some());
+        assert_eq!(tx.on_flow(&[0x21, 0, 0], 2), Err(TransferError::Malformed));
     }
 
     #[test]

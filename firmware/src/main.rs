@@ -565,7 +565,6 @@ async fn detector_task(
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
     let mut picker = ScanPicker::new();
     let mut last_masks = (0u8, 0u8);
-    let detector = service.detector();
     scans.adc.start();
     scans.timer.start();
     loop {
@@ -598,7 +597,8 @@ async fn detector_task(
         // Logs, after the timed part.
         let out = &result.output;
         for d in out.decisions.iter() {
-            let name = detector
+            let name = service
+                .detector()
                 .and_then(|det| det.events().get(usize::from(d.event.0)))
                 .map_or("?", |n| n.as_str());
             info!(
