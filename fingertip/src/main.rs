@@ -129,6 +129,33 @@ enum Command {
         #[arg(long)]
         candump: Option<PathBuf>,
     },
+    /// Load a detector into a running fingertip over its service channel (SocketCAN, CAN
+    /// FD): builds the configuration's image, sends it, and reports the CRC-32 the
+    /// fingertip checked. It takes over at the next phase entry, or at once with
+    /// --activate.
+    Load {
+        /// Detector configuration (TOML).
+        config: PathBuf,
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+        /// Put it in service at the fingertip's next tick instead of the next phase entry.
+        #[arg(long)]
+        activate: bool,
+    },
+    /// What a fingertip runs: firmware version and build, the detector in service (its
+    /// CRC-32 and name) and any waiting for its phase boundary.
+    Info {
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+    },
     /// Worst-case CAN bus load (CAN FD, or classic CAN) and event-frame latency for N
     /// fingertips, both directions, bit stuffing in both phases.
     Busload {
@@ -362,6 +389,13 @@ fn run(cli: Cli) -> Result<()> {
             seconds,
             candump.as_deref(),
         ),
+        Command::Load {
+            config,
+            node,
+            iface,
+            activate,
+        } => load_cmd(&config, node, &iface, activate),
+        Command::Info { node, iface } => info_cmd(node, &iface),
         Command::Busload {
             fingertips,
             decimation,
@@ -967,6 +1001,128 @@ fn stream_series(
     let t0 = t0.unwrap_or(0.0);
     let t: Vec<f64> = t.iter().map(|x| x - t0).collect();
     (t, series, decisions)
+}
+
+/// The detector's name as a fingertip keeps it: the configuration file's stem, cut to
+/// the protocol's 16 bytes at a character.
+fn detector_name(config: &Path) -> String {
+    let stem = config
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut name = String::new();
+    for c in stem.chars() {
+        if name.len() + c.len_utf8() > fingertip_can::service::NAME_MAX {
+            break;
+        }
+        name.push(c);
+    }
+    name
+}
+
+/// A service-channel client for `node` on `iface`.
+#[cfg(target_os = "linux")]
+fn service_client(
+    node: NodeId,
+    iface: &str,
+) -> Result<fingertip::can_tools::service::Client<fingertip::can_tools::service::SocketLink>> {
+    use fingertip::can_tools::service::{Client, SocketLink};
+    let link = SocketLink::open(iface, node).with_context(|| format!("CAN interface {iface}"))?;
+    Ok(Client::new(link))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn service_client(
+    _node: NodeId,
+    iface: &str,
+) -> Result<fingertip::can_tools::service::Client<NoLink>> {
+    bail!("CAN interface {iface}: SocketCAN is Linux only")
+}
+
+/// Stands in for a link where SocketCAN does not exist.
+#[cfg(not(target_os = "linux"))]
+struct NoLink;
+
+#[cfg(not(target_os = "linux"))]
+impl fingertip::can_tools::service::Link for NoLink {
+    fn send(&mut self, _: &[u8]) -> std::io::Result<()> {
+        Err(std::io::Error::other("no SocketCAN"))
+    }
+    fn recv(&mut self, _: u64) -> std::io::Result<Option<Vec<u8>>> {
+        Err(std::io::Error::other("no SocketCAN"))
+    }
+    fn now_us(&mut self) -> u64 {
+        0
+    }
+}
+
+/// An error response as one line.
+fn refused(node: NodeId, code: fingertip_can::service::ErrorCode, text: &str) -> anyhow::Error {
+    anyhow!("node {}: {}: {text}", node.get(), code.name())
+}
+
+fn load_cmd(config: &Path, node: u8, iface: &str, activate: bool) -> Result<()> {
+    use fingertip_can::service::{Request, Response, crc32};
+    let node = node_id(node)?;
+    let parsed = detector_build::load(config)?;
+    let image = detector_build::compile(&parsed)
+        .with_context(|| config.display().to_string())?
+        .image();
+    let name = detector_name(config);
+    let crc = crc32(&image);
+    let mut client = service_client(node, iface)?;
+    match client.request(&Request::Load {
+        name: &name,
+        image: &image,
+    })? {
+        Response::Staged(c) if c == crc => {}
+        Response::Staged(c) => bail!(
+            "node {}: the fingertip checked CRC-32 {c:#010x}, the image's is {crc:#010x}",
+            node.get()
+        ),
+        Response::Error(code, text) => return Err(refused(node, code, &text)),
+        other => bail!("node {}: unexpected answer {other:?}", node.get()),
+    }
+    println!(
+        "node {}: `{name}` loaded ({} bytes, CRC-32 {crc:#010x}), checked and staged",
+        node.get(),
+        image.len()
+    );
+    if activate {
+        match client.request(&Request::Activate)? {
+            Response::Active(c) => println!("node {}: in service, CRC-32 {c:#010x}", node.get()),
+            Response::Error(code, text) => return Err(refused(node, code, &text)),
+            other => bail!("node {}: unexpected answer {other:?}", node.get()),
+        }
+    } else {
+        println!("it takes over at the next phase entry (or run with --activate)");
+    }
+    Ok(())
+}
+
+fn info_cmd(node: u8, iface: &str) -> Result<()> {
+    use fingertip_can::service::{Request, Response};
+    let node = node_id(node)?;
+    let mut client = service_client(node, iface)?;
+    match client.request(&Request::Identify)? {
+        Response::Identity(i) => {
+            let [major, minor, patch] = i.version;
+            println!(
+                "node {}: firmware {major}.{minor}.{patch} (build {:08x}); detector `{}` ({}), CRC-32 {:#010x}",
+                node.get(),
+                i.build,
+                i.detector_name,
+                i.mode.name(),
+                i.detector_crc
+            );
+            if let Some(s) = i.staged_crc {
+                println!("staged: CRC-32 {s:#010x}, waiting for the next phase entry");
+            }
+            Ok(())
+        }
+        Response::Error(code, text) => Err(refused(node, code, &text)),
+        other => bail!("node {}: unexpected answer {other:?}", node.get()),
+    }
 }
 
 fn monitor_cmd(
