@@ -8,6 +8,7 @@ pub mod can_timing;
 pub mod channel_set;
 pub mod checksum;
 pub mod engine;
+pub mod flash_map;
 pub mod load;
 pub mod node_id;
 pub mod rail;
