@@ -23,13 +23,13 @@ pub const STORE: Range<u32> = SLOT_B.end..SLOT_B.end + 8 * 1024;
 
 const _: () = assert!(STORE.end == 128 * 1024);
 const _: () = assert!(
-    SLOT_A.start % PAGE == 0
-        && SLOT_B.start % PAGE == 0
-        && STORE.start % PAGE == 0
-        && STORE.end % PAGE == 0
+    SLOT_A.start.is_multiple_of(PAGE)
+        && SLOT_B.start.is_multiple_of(PAGE)
+        && STORE.start.is_multiple_of(PAGE)
+        && STORE.end.is_multiple_of(PAGE)
         // The NUCLEO-G474RE's single-bank pages are 4 KiB.
-        && SLOT_A.start % 4096 == 0
-        && STORE.start % 4096 == 0
+        && SLOT_A.start.is_multiple_of(4096)
+        && STORE.start.is_multiple_of(4096)
 );
 
 #[cfg(test)]

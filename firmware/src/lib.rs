@@ -11,6 +11,7 @@ pub mod engine;
 pub mod flash_map;
 pub mod load;
 pub mod node_id;
+pub mod nvm;
 pub mod rail;
 pub mod reset;
 pub mod sampling;
