@@ -5,6 +5,7 @@
 //! is not built in: the board finds it at boot ([`crate::node_id`]).
 
 use detector_core::{Detector, DetectorTick, ImageError};
+use fingertip_can::service::DetectorName;
 use fingertip_can::{BusFormat, NodeId, Transmitter};
 
 use crate::checksum::crc32;
@@ -14,7 +15,7 @@ mod consts {
     include!(concat!(env!("OUT_DIR"), "/build_consts.rs"));
 }
 
-pub use consts::{CONFIG_CHECKSUM, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
+pub use consts::{CONFIG_CHECKSUM, CONFIG_NAME, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
 
 /// The sample rate, Hz: the sample timer's ([`TRIGGER_RATE_MHZ`]), rounded; the
 /// detector's own rate is within 100 ppm of it (`build.rs` checks). The fallback reports
@@ -78,7 +79,10 @@ pub fn start<'d, T: DetectorTick>(
     let params = EngineParams::new(board, crc32(image));
     let reason = match load_detector(detector, image) {
         Ok(()) => match Engine::new(detector, tick, params) {
-            Ok(engine) => return Service::Running(engine),
+            Ok(engine) => {
+                let name = DetectorName::try_from(CONFIG_NAME).unwrap_or_default();
+                return Service::Running(engine.with_name(name));
+            }
             Err(e) => FallbackReason::Engine(e),
         },
         Err(e) => FallbackReason::Image(e),
@@ -247,7 +251,11 @@ mod tests {
             ApproachTick,
             board(ResetReason::PowerOn),
         );
-        assert!(matches!(service, Service::Running(_)));
+        let Service::Running(engine) = &service else {
+            panic!("the embedded detector runs")
+        };
+        assert_eq!(engine.in_service().2.as_str(), CONFIG_NAME);
+        assert!(CONFIG_SOURCE.contains(CONFIG_NAME) && !CONFIG_NAME.is_empty());
         assert_eq!(service.fallback_reason(), None);
         assert_eq!(service.rate_hz(), RATE_HZ);
         let (messages, checked_in) = run(&mut service);

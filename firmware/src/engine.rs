@@ -24,7 +24,7 @@
 //! [`TickRunner::step`].
 
 use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
-use fingertip_can::service::{DetectorName, Mode};
+use fingertip_can::service::{DetectorName, Mode, NAME_MAX};
 use fingertip_can::{
     BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
     RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
@@ -103,6 +103,8 @@ impl BoardInfo {
             faults,
             tick_rate_hz,
             config_checksum: image_crc,
+            firmware: crate::version::VERSION,
+            build: crate::version::BUILD_HASH,
             ..Status::default()
         };
         status
@@ -233,6 +235,15 @@ pub struct TickResult {
 pub const LATCHED_FLAGS: FaultFlags =
     FaultFlags(FaultFlags::LATE.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
 
+/// A detector's name as the status carries it: its bytes, zero-padded.
+fn name_bytes(name: &DetectorName) -> [u8; NAME_MAX] {
+    let mut b = [0u8; NAME_MAX];
+    for (d, s) in b.iter_mut().zip(name.as_bytes()) {
+        *d = *s;
+    }
+    b
+}
+
 /// The receiver of a fingertip running `detector` at `rate_hz`: its phase count, the
 /// timeouts of `params`.
 fn receiver_for(
@@ -330,7 +341,9 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         detector: &'d mut Detector,
         params: EngineParams,
     ) -> Result<Engine<'d, T>, EngineError> {
-        Engine::build(detector, None, params)
+        let mut e = Engine::build(detector, None, params)?;
+        e.status.mode = Mode::Loaded;
+        Ok(e)
     }
 
     fn build(
@@ -367,8 +380,10 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         })
     }
 
-    /// Names the detector in service (reported by the service channel's identify).
+    /// Names the detector in service (reported in the status heartbeat and by the
+    /// service channel's identify).
     pub fn with_name(mut self, name: DetectorName) -> Engine<'d, T> {
+        self.status.detector_name = name_bytes(&name);
         self.name = name;
         self
     }
@@ -432,6 +447,8 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         self.state = self.detector.new_state();
         self.map = ChannelMap::resolve(self.detector);
         self.status.config_checksum = s.crc;
+        self.status.mode = Mode::Loaded;
+        self.status.detector_name = name_bytes(&s.name);
         self.name = s.name;
         // The controller's current phase is entered anew by the new detector.
         self.applied_phase = None;
@@ -561,11 +578,14 @@ impl Fallback {
         Fallback {
             transmitter,
             tx: TxState::new(),
-            status: params.board.status(
-                u16::try_from(rate_hz).unwrap_or(u16::MAX),
-                params.image_crc,
-                FaultFlags::CONFIG_FALLBACK,
-            ),
+            status: Status {
+                mode: Mode::Fallback,
+                ..params.board.status(
+                    u16::try_from(rate_hz).unwrap_or(u16::MAX),
+                    params.image_crc,
+                    FaultFlags::CONFIG_FALLBACK,
+                )
+            },
         }
     }
 
@@ -1035,6 +1055,64 @@ mod tests {
         let old = e.take_retired().expect("retired");
         assert_eq!(old.events(), d.events());
         assert!(e.take_retired().is_none());
+    }
+
+    /// The status pages a full round of heartbeats from tick `from` sends.
+    fn status_round<T: DetectorTick>(
+        e: &mut Engine<'_, T>,
+        rx: &RxShared,
+        from: Tick,
+    ) -> Vec<StatusPage> {
+        (from..from + 250 * u32::from(fingertip_can::STATUS_PAGES))
+            .flat_map(|t| {
+                status_pages(&e.tick(&sample(t, 0.0, 0.0), rx, &Health::default()).frames)
+            })
+            .collect()
+    }
+
+    /// The name the detector-name pages spell.
+    fn spelled(pages: &[StatusPage]) -> String {
+        let mut name = [0u8; 16];
+        for p in pages {
+            if let StatusPage::DetectorName { part, bytes } = p {
+                let at = usize::from(*part) * 4;
+                name[at..at + 4].copy_from_slice(bytes);
+            }
+        }
+        String::from_utf8_lossy(&name)
+            .trim_end_matches('\0')
+            .to_string()
+    }
+
+    #[test]
+    fn the_heartbeat_tells_the_firmware_and_the_detector_in_service() {
+        let d = detector();
+        let mut e = engine(&d).with_name(DetectorName::try_from("approach-2026").unwrap());
+        let rx = RxShared::new();
+        let pages = status_round(&mut e, &rx, 0);
+        assert!(pages.contains(&StatusPage::Firmware {
+            version: crate::version::VERSION,
+            mode: Mode::BuiltIn
+        }));
+        assert!(pages.contains(&StatusPage::Build {
+            hash: crate::version::BUILD_HASH
+        }));
+        assert_eq!(spelled(&pages), "approach-2026");
+        // A loaded detector: its name, its CRC, the interpreter.
+        let lax = image_with_threshold(-0.1);
+        let mut spare = Detector::empty();
+        let mut loader = crate::load::Loader::new(&mut spare, 5000.0);
+        e.stage(loader.stage("lax-fit", &lax).unwrap());
+        e.activate();
+        let pages = status_round(&mut e, &rx, 10_000);
+        assert_eq!(spelled(&pages), "lax-fit");
+        assert!(pages.contains(&StatusPage::Config {
+            checksum: crc32(&lax)
+        }));
+        assert!(pages.contains(&StatusPage::Firmware {
+            version: crate::version::VERSION,
+            mode: Mode::Loaded
+        }));
     }
 
     #[test]

@@ -23,4 +23,5 @@ pub mod timing;
 pub mod tmp117;
 pub mod trigger;
 pub mod txqueue;
+pub mod version;
 pub mod wiring;

@@ -25,30 +25,12 @@ use fingertip_can::transfer::{MAX_MESSAGE, Payload, Reassembler, Received, SINGL
 use crate::engine::{Engine, Service};
 use crate::load::{LoadError, Loader, Staged};
 use crate::shared::RawMutex;
+use crate::version::VERSION;
 
 /// Consecutive frames the fingertip takes per flow control: with no gap asked for, a
 /// block is 16 × 170 µs = 2.7 ms of bus time, and the receive task has the next flow
 /// control's round trip to catch up.
 pub const BLOCK_SIZE: u8 = 16;
-
-/// The firmware's version, from the crate's.
-pub const VERSION: [u8; 3] = {
-    const fn number(s: &str) -> u8 {
-        let b = s.as_bytes();
-        let mut v = 0u8;
-        let mut i = 0;
-        while i < b.len() {
-            v = v * 10 + (b[i] - b'0');
-            i += 1;
-        }
-        v
-    }
-    [
-        number(env!("CARGO_PKG_VERSION_MAJOR")),
-        number(env!("CARGO_PKG_VERSION_MINOR")),
-        number(env!("CARGO_PKG_VERSION_PATCH")),
-    ]
-};
 
 /// What the detector task last published of the detector in service.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -141,18 +123,13 @@ impl<'d> Inner<'d> {
 pub struct Requests<'m, 'd> {
     loader: Loader<'d>,
     mailbox: &'m Mailbox<'d>,
-    build: u32,
 }
 
 impl<'m, 'd> Requests<'m, 'd> {
     /// Requests served with `loader`'s spare detector, meeting the detector task in
-    /// `mailbox`; `build` is reported as the firmware's build (the commit's first 32 bits).
-    pub fn new(loader: Loader<'d>, mailbox: &'m Mailbox<'d>, build: u32) -> Requests<'m, 'd> {
-        Requests {
-            loader,
-            mailbox,
-            build,
-        }
+    /// `mailbox`.
+    pub fn new(loader: Loader<'d>, mailbox: &'m Mailbox<'d>) -> Requests<'m, 'd> {
+        Requests { loader, mailbox }
     }
 
     /// Carries out one request.
@@ -167,7 +144,7 @@ impl<'m, 'd> Requests<'m, 'd> {
                 });
                 Response::Identity(Identity {
                     version: VERSION,
-                    build: self.build,
+                    build: crate::version::BUILD_HASH,
                     mode: p.mode,
                     detector_crc: p.crc,
                     detector_name: p.name,
@@ -322,11 +299,5 @@ mod tests {
             let frame = respond(0x10, &r, 0).expect("fits a single frame");
             assert!(frame.data().len() <= 64);
         }
-    }
-
-    #[test]
-    fn the_version_is_the_crates() {
-        let v = env!("CARGO_PKG_VERSION");
-        assert_eq!(format!("{}.{}.{}", VERSION[0], VERSION[1], VERSION[2]), v);
     }
 }

@@ -83,7 +83,7 @@ impl Fingertip {
         Fingertip {
             service,
             end: ServiceEnd::new(),
-            requests: Requests::new(loader, mailbox, 0x1234_5678),
+            requests: Requests::new(loader, mailbox),
             mailbox,
             rx: RxShared::new(),
             tick: 0,
@@ -344,7 +344,7 @@ fn an_image_loads_whole_and_takes_over_at_activation() {
     };
     assert_eq!((id.mode, id.detector_crc), (Mode::BuiltIn, built_in));
     assert_eq!(id.staged_crc, Some(crc32(&image)));
-    assert_eq!(id.build, 0x1234_5678);
+    assert_eq!(id.build, firmware::version::BUILD_HASH);
     assert_eq!(
         client.request(&Request::Activate).unwrap(),
         Response::Active(crc32(&image))
