@@ -14,6 +14,9 @@
 //! | [`Request::Identify`] | 0x01 | — | [`Identity`] |
 //! | [`Request::Load`] | 0x10 | name length, name (UTF-8, ≤ [`NAME_MAX`]), detector image | CRC-32 of the image (`u32`), staged |
 //! | [`Request::Activate`] | 0x11 | — | CRC-32 of the detector now running |
+//! | [`Request::Save`] | 0x12 | as Load | CRC-32 (`u32`), the slot written (1 A, 2 B, `u8`), the CPU's worst-case stall (ms, `u16`) |
+//! | [`Request::EnterService`] | 0x30 | — | — |
+//! | [`Request::LeaveService`] | 0x31 | — | — |
 //! | [`Request::ReadKey`] | 0x20 | key (`u16`) | value (4 bytes) |
 //! | [`Request::WriteKey`] | 0x21 | key (`u16`), value (4 bytes) | — |
 //!
@@ -244,6 +247,20 @@ pub enum Request<'a> {
     },
     /// Put the staged detector in service at the next tick, in its first phase.
     Activate,
+    /// Stage this detector image as [`Request::Load`] does and save it to a flash slot,
+    /// for the next boots; only in the service state.
+    Save {
+        /// The detector's name (≤ [`NAME_MAX`] bytes).
+        name: &'a str,
+        /// The image.
+        image: &'a [u8],
+    },
+    /// Enter the service state: the detector out of service (only the heartbeat goes
+    /// out, with `FaultService`), the flash writable. Writes of the store and saves are
+    /// refused outside it: a flash write stalls the CPU.
+    EnterService,
+    /// Leave the service state: the detector back in service, from a fresh state.
+    LeaveService,
     /// Read a key of the store.
     ReadKey(Key),
     /// Write a key of the store.
@@ -272,11 +289,13 @@ pub enum ErrorCode {
     Store = 7,
     /// The fingertip cannot do it in its present state.
     Busy = 8,
+    /// A flash write outside the service state.
+    NotInService = 9,
 }
 
 impl ErrorCode {
     /// Every code, by raw value minus one.
-    pub const ALL: [ErrorCode; 8] = [
+    pub const ALL: [ErrorCode; 9] = [
         ErrorCode::Corrupt,
         ErrorCode::Malformed,
         ErrorCode::Image,
@@ -285,6 +304,7 @@ impl ErrorCode {
         ErrorCode::Key,
         ErrorCode::Store,
         ErrorCode::Busy,
+        ErrorCode::NotInService,
     ];
 
     fn from_raw(raw: u8) -> Option<ErrorCode> {
@@ -304,6 +324,7 @@ impl ErrorCode {
             ErrorCode::Key => "bad key or value",
             ErrorCode::Store => "store failed",
             ErrorCode::Busy => "busy",
+            ErrorCode::NotInService => "not in the service state",
         }
     }
 }
@@ -321,6 +342,17 @@ pub enum Response {
     Value([u8; 4]),
     /// To [`Request::WriteKey`].
     Written,
+    /// To [`Request::Save`]: staged and saved.
+    Saved {
+        /// The image's CRC-32.
+        crc: u32,
+        /// The slot written: 1 A, 2 B.
+        slot: u8,
+        /// The worst-case time the CPU stalled for the flash, ms.
+        stall_ms: u16,
+    },
+    /// To [`Request::EnterService`] and [`Request::LeaveService`].
+    Done,
     /// The request failed.
     Error(ErrorCode, Detail),
 }
@@ -448,6 +480,9 @@ const LOAD: u8 = 0x10;
 const ACTIVATE: u8 = 0x11;
 const READ_KEY: u8 = 0x20;
 const WRITE_KEY: u8 = 0x21;
+const SAVE: u8 = 0x12;
+const ENTER_SERVICE: u8 = 0x30;
+const LEAVE_SERVICE: u8 = 0x31;
 /// Bit 7 marks a response.
 const RESPONSE: u8 = 0x80;
 
@@ -459,6 +494,9 @@ impl<'a> Request<'a> {
             Request::Activate => ACTIVATE,
             Request::ReadKey(_) => READ_KEY,
             Request::WriteKey(..) => WRITE_KEY,
+            Request::Save { .. } => SAVE,
+            Request::EnterService => ENTER_SERVICE,
+            Request::LeaveService => LEAVE_SERVICE,
         }
     }
 
@@ -466,8 +504,11 @@ impl<'a> Request<'a> {
     pub fn encode(&self, buf: &mut [u8]) -> Result<usize, ServiceError> {
         let mut w = Writer::new(buf, self.code());
         match *self {
-            Request::Identify | Request::Activate => {}
-            Request::Load { name, image } => {
+            Request::Identify
+            | Request::Activate
+            | Request::EnterService
+            | Request::LeaveService => {}
+            Request::Load { name, image } | Request::Save { name, image } => {
                 if name.len() > NAME_MAX {
                     return Err(ServiceError::Malformed);
                 }
@@ -492,14 +533,20 @@ impl<'a> Request<'a> {
         let r = match code {
             IDENTIFY => Request::Identify,
             ACTIVATE => Request::Activate,
-            LOAD => {
+            ENTER_SERVICE => Request::EnterService,
+            LEAVE_SERVICE => Request::LeaveService,
+            LOAD | SAVE => {
                 let n = usize::from(b.u8()?);
                 if n > NAME_MAX {
                     return Err(ServiceError::Malformed);
                 }
                 let name = core::str::from_utf8(b.take(n)?).map_err(|_| ServiceError::Malformed)?;
                 let image = b.take(b.0.len())?;
-                Request::Load { name, image }
+                if code == LOAD {
+                    Request::Load { name, image }
+                } else {
+                    Request::Save { name, image }
+                }
             }
             READ_KEY => Request::ReadKey(key(&mut b)?),
             WRITE_KEY => {
@@ -545,7 +592,16 @@ impl Response {
                     }
                     Response::Staged(crc) | Response::Active(crc) => w.put(&crc.to_le_bytes()),
                     Response::Value(v) => w.put(v),
-                    Response::Written | Response::Error(..) => {}
+                    Response::Saved {
+                        crc,
+                        slot,
+                        stall_ms,
+                    } => {
+                        w.put(&crc.to_le_bytes());
+                        w.put(&[*slot]);
+                        w.put(&stall_ms.to_le_bytes());
+                    }
+                    Response::Written | Response::Done | Response::Error(..) => {}
                 }
             }
         }
@@ -590,6 +646,12 @@ impl Response {
             ACTIVATE => Response::Active(b.u32()?),
             READ_KEY => Response::Value(b.array()?),
             WRITE_KEY => Response::Written,
+            SAVE => Response::Saved {
+                crc: b.u32()?,
+                slot: b.u8()?,
+                stall_ms: b.u16()?,
+            },
+            ENTER_SERVICE | LEAVE_SERVICE => Response::Done,
             _ => return Err(ServiceError::Malformed),
         };
         b.end()?;
@@ -635,6 +697,12 @@ mod tests {
     fn requests_round_trip_and_every_bit_error_is_caught() {
         round_trip(Request::Identify);
         round_trip(Request::Activate);
+        round_trip(Request::EnterService);
+        round_trip(Request::LeaveService);
+        round_trip(Request::Save {
+            name: "fitted",
+            image: &[9; 40],
+        });
         round_trip(Request::Load {
             name: "approach",
             image: &[1, 2, 3, 4, 5],
@@ -673,6 +741,16 @@ mod tests {
             (ACTIVATE, Response::Active(43)),
             (READ_KEY, Response::Value([1, 2, 3, 4])),
             (WRITE_KEY, Response::Written),
+            (
+                SAVE,
+                Response::Saved {
+                    crc: 5,
+                    slot: 2,
+                    stall_ms: 180,
+                },
+            ),
+            (ENTER_SERVICE, Response::Done),
+            (LEAVE_SERVICE, Response::Done),
             (
                 LOAD,
                 Response::Error(

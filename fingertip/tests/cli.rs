@@ -1034,8 +1034,8 @@ fn fit_finds_what_is_separable_and_refuses_what_is_not() {
     }
 }
 
-/// `load` and `info` refuse bad input with one line naming it, before touching the bus; a
-/// missing interface is named too.
+/// `load`, `info` and `calibrate` refuse bad input with one line naming it, before
+/// touching the bus; a missing interface is named too.
 #[test]
 fn load_and_info_name_what_is_wrong() {
     let dir = scratch("load");
@@ -1060,6 +1060,29 @@ fn load_and_info_name_what_is_wrong() {
         ),
         (
             vec!["info", "--node", "3", "--iface", "nosuch0"],
+            "CAN interface nosuch0",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "force_z.gain"],
+            "unknown key `force_z.gain`",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "force_x.gain=abc"],
+            "force_x.gain: `abc` is not a number",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "node_id=-1"],
+            "node_id: `-1` is not a whole number",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--node",
+                "3",
+                "node_id=4",
+                "--iface",
+                "nosuch0",
+            ],
             "CAN interface nosuch0",
         ),
     ] {

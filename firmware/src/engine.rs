@@ -244,6 +244,26 @@ fn name_bytes(name: &DetectorName) -> [u8; NAME_MAX] {
     b
 }
 
+/// A tick with the detector out of service: the board's health into `status`, and the
+/// heartbeat when due (nothing evaluated, nothing decided).
+fn heartbeat_only(
+    transmitter: &Transmitter,
+    tx: &mut TxState,
+    status: &mut Status,
+    sample: &AdcSample,
+    health: &Health,
+) -> TickResult {
+    report_health(status, health, sample, tx.dropped());
+    let output = Output::default();
+    let frames = transmitter.tick(tx, sample.tick, &output, status);
+    let heartbeat = frames.iter().any(is_status);
+    TickResult {
+        output,
+        frames,
+        heartbeat,
+    }
+}
+
 /// The receiver of a fingertip running `detector` at `rate_hz`: its phase count, the
 /// timeouts of `params`.
 fn receiver_for(
@@ -303,6 +323,8 @@ pub struct Engine<'d, T: DetectorTick> {
     staged: Option<Staged<'d>>,
     activate: bool,
     retired: Option<&'d mut Detector>,
+    /// In the service state: the detector out of service, heartbeats only.
+    service: bool,
     state: State,
     map: ChannelMap,
     receiver: Receiver,
@@ -377,6 +399,7 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             staged: None,
             activate: false,
             retired: None,
+            service: false,
         })
     }
 
@@ -421,6 +444,25 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
     pub fn activate(&mut self) -> bool {
         self.activate = self.staged.is_some();
         self.activate
+    }
+
+    /// Enters (`true`) or leaves the service state. In it the detector is out of
+    /// service: no confidence stream, no events, the heartbeat with
+    /// [`FaultFlags::SERVICE`]; ticks go on (their frames are the heartbeat's) but the
+    /// flash writes it is for stall the CPU, so the detector leaves it from a fresh state,
+    /// entering the controller's phase anew.
+    pub fn set_service(&mut self, on: bool) {
+        if self.service && !on {
+            self.state = self.detector.new_state();
+            self.applied_phase = None;
+        }
+        self.service = on;
+        self.status.faults.set(FaultFlags::SERVICE, on);
+    }
+
+    /// Whether it is in the service state.
+    pub fn in_service_state(&self) -> bool {
+        self.service
     }
 
     /// The detector a staged one replaced, to load into next.
@@ -486,6 +528,15 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             (receiver.inputs(rx, now), rx.link().phase())
         });
 
+        if self.service {
+            return heartbeat_only(
+                &self.transmitter,
+                &mut self.tx,
+                &mut self.status,
+                sample,
+                health,
+            );
+        }
         // A staged detector takes over at a phase entry, or when asked to, in this tick.
         let entering = phase.is_some_and(|p| self.applied_phase != Some((p.phase, p.sequence)));
         if entering || self.activate {
@@ -597,17 +648,13 @@ impl Fallback {
     /// One sample: the board's health into the status, and the heartbeat when due (the
     /// output is empty: nothing evaluated, nothing decided).
     pub fn tick(&mut self, sample: &AdcSample, health: &Health) -> TickResult {
-        report_health(&mut self.status, health, sample, self.tx.dropped());
-        let output = Output::default();
-        let frames = self
-            .transmitter
-            .tick(&mut self.tx, sample.tick, &output, &self.status);
-        let heartbeat = frames.iter().any(is_status);
-        TickResult {
-            output,
-            frames,
-            heartbeat,
-        }
+        heartbeat_only(
+            &self.transmitter,
+            &mut self.tx,
+            &mut self.status,
+            sample,
+            health,
+        )
     }
 }
 

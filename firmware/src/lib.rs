@@ -9,6 +9,7 @@ pub mod channel_set;
 pub mod checksum;
 pub mod engine;
 pub mod flash_map;
+pub mod flash_sim;
 pub mod load;
 pub mod node_id;
 pub mod nvm;

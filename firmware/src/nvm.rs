@@ -268,12 +268,7 @@ impl<F: NorFlash> Nvm<F> {
         buf: &mut [u8],
     ) -> Result<Option<SlotHeader>, NvmError> {
         let r = slot.range();
-        let mut h = [0u8; HEADER];
-        self.flash
-            .read(r.start, &mut h)
-            .await
-            .map_err(|_| NvmError::Flash)?;
-        let Some(header) = SlotHeader::parse(&h) else {
+        let Some(header) = self.read_header(slot).await? else {
             return Ok(None);
         };
         let Some(image) = buf.get_mut(..header.len as usize) else {
@@ -286,6 +281,16 @@ impl<F: NorFlash> Nvm<F> {
         Ok((crc32(image) == header.crc).then_some(header))
     }
 
+    /// `slot`'s header, if it is one (its image not checked).
+    async fn read_header(&mut self, slot: Slot) -> Result<Option<SlotHeader>, NvmError> {
+        let mut h = [0u8; HEADER];
+        self.flash
+            .read(slot.range().start, &mut h)
+            .await
+            .map_err(|_| NvmError::Flash)?;
+        Ok(SlotHeader::parse(&h))
+    }
+
     /// Saves `image`, named `name`, into the slot not chosen now and chooses it: the slot's
     /// pages erased, the image, its header, then the store's [`ACTIVE_SLOT`]. Returns the
     /// slot and the worst-case stall of the whole save (µs).
@@ -293,17 +298,16 @@ impl<F: NorFlash> Nvm<F> {
         &mut self,
         name: &DetectorName,
         image: &[u8],
-        scratch: &mut [u8],
     ) -> Result<(Slot, u32), NvmError> {
         if image.len() > SLOT_IMAGE_MAX {
             return Err(NvmError::TooLong(image.len() as u32));
         }
         let active = self.active_slot().await?;
         let slot = active.map_or(Slot::A, Slot::other);
-        // One more than any whole slot's sequence.
+        // One more than any slot's sequence.
         let mut sequence = 1;
         for s in [Slot::A, Slot::B] {
-            if let Some(h) = self.read_slot(s, scratch).await? {
+            if let Some(h) = self.read_header(s).await? {
                 sequence = sequence.max(h.sequence.wrapping_add(1));
             }
         }
@@ -362,141 +366,9 @@ impl<F: NorFlash> Nvm<F> {
 }
 
 #[cfg(test)]
-pub(crate) mod sim {
-    //! A simulated flash with the G4's rules (8-byte writes only to erased double words,
-    //! 2 KiB pages) that loses power at a chosen step: a double word half programmed, a
-    //! page half erased, and nothing after it until revived.
-
-    use embedded_storage_async::nor_flash::{
-        ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-    };
-
-    use crate::flash_map::{PAGE, STORE, WRITE};
-
-    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-    pub enum SimError {
-        PowerCut,
-        NotErased,
-        Unaligned,
-    }
-
-    impl NorFlashError for SimError {
-        fn kind(&self) -> NorFlashErrorKind {
-            match self {
-                SimError::Unaligned => NorFlashErrorKind::NotAligned,
-                _ => NorFlashErrorKind::Other,
-            }
-        }
-    }
-
-    pub struct SimFlash {
-        pub bytes: Vec<u8>,
-        /// Steps (double words programmed, pages erased) left before the power fails.
-        pub power: Option<usize>,
-        pub dead: bool,
-        pub steps: usize,
-    }
-
-    impl SimFlash {
-        pub fn new() -> SimFlash {
-            SimFlash {
-                bytes: vec![0xFF; STORE.end as usize],
-                power: None,
-                dead: false,
-                steps: 0,
-            }
-        }
-
-        /// The power comes back (the board restarts on the same flash).
-        pub fn revive(&mut self) {
-            self.power = None;
-            self.dead = false;
-        }
-
-        /// One step; whether the power fails during it.
-        fn step(&mut self) -> Result<bool, SimError> {
-            if self.dead {
-                return Err(SimError::PowerCut);
-            }
-            self.steps += 1;
-            match &mut self.power {
-                Some(0) => {
-                    self.dead = true;
-                    Ok(true)
-                }
-                Some(n) => {
-                    *n -= 1;
-                    Ok(false)
-                }
-                None => Ok(false),
-            }
-        }
-    }
-
-    impl ErrorType for SimFlash {
-        type Error = SimError;
-    }
-
-    impl ReadNorFlash for SimFlash {
-        const READ_SIZE: usize = 1;
-        async fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), SimError> {
-            if self.dead {
-                return Err(SimError::PowerCut);
-            }
-            let o = offset as usize;
-            bytes.copy_from_slice(&self.bytes[o..o + bytes.len()]);
-            Ok(())
-        }
-        fn capacity(&self) -> usize {
-            self.bytes.len()
-        }
-    }
-
-    impl NorFlash for SimFlash {
-        const WRITE_SIZE: usize = WRITE as usize;
-        const ERASE_SIZE: usize = PAGE as usize;
-
-        async fn erase(&mut self, from: u32, to: u32) -> Result<(), SimError> {
-            if !from.is_multiple_of(PAGE) || !to.is_multiple_of(PAGE) {
-                return Err(SimError::Unaligned);
-            }
-            for page in (from..to).step_by(PAGE as usize) {
-                let p = page as usize;
-                if self.step()? {
-                    // Half the page erased.
-                    self.bytes[p..p + PAGE as usize / 2].fill(0xFF);
-                    return Err(SimError::PowerCut);
-                }
-                self.bytes[p..p + PAGE as usize].fill(0xFF);
-            }
-            Ok(())
-        }
-
-        async fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), SimError> {
-            if !offset.is_multiple_of(WRITE) || !bytes.len().is_multiple_of(WRITE as usize) {
-                return Err(SimError::Unaligned);
-            }
-            for (k, word) in bytes.chunks(WRITE as usize).enumerate() {
-                let o = offset as usize + k * WRITE as usize;
-                if self.bytes[o..o + WRITE as usize].iter().any(|&b| b != 0xFF) {
-                    return Err(SimError::NotErased);
-                }
-                if self.step()? {
-                    // Half the double word programmed.
-                    self.bytes[o..o + 4].copy_from_slice(&word[..4]);
-                    return Err(SimError::PowerCut);
-                }
-                self.bytes[o..o + WRITE as usize].copy_from_slice(word);
-            }
-            Ok(())
-        }
-    }
-}
-
-#[cfg(test)]
 mod tests {
-    use super::sim::SimFlash;
     use super::*;
+    use crate::flash_sim::SimFlash;
     use embassy_futures::block_on;
 
     fn name(s: &str) -> DetectorName {
@@ -539,15 +411,12 @@ mod tests {
         block_on(async {
             assert_eq!(nvm.boot_image(&mut buf).await, Ok(BootImage::BuiltIn));
             let a = image(1, 1785);
-            let (slot, stall) = nvm.save(&name("first"), &a, &mut buf).await.unwrap();
+            let (slot, stall) = nvm.save(&name("first"), &a).await.unwrap();
             assert_eq!(slot, Slot::A);
             // 4 pages of the slot and one of the store, 1785 + 56 bytes.
             assert_eq!(stall, 5 * ERASE_US + 231 * PROGRAM_US);
             let b = image(2, 5000);
-            assert_eq!(
-                nvm.save(&name("second"), &b, &mut buf).await.unwrap().0,
-                Slot::B
-            );
+            assert_eq!(nvm.save(&name("second"), &b).await.unwrap().0, Slot::B);
             let Ok(BootImage::Slot(Slot::B, h)) = nvm.boot_image(&mut buf).await else {
                 panic!()
             };
@@ -555,10 +424,7 @@ mod tests {
             assert_eq!(&buf[..5000], &b[..]);
             // A third save goes back to A, newer than both.
             let c = image(3, 100);
-            assert_eq!(
-                nvm.save(&name("third"), &c, &mut buf).await.unwrap().0,
-                Slot::A
-            );
+            assert_eq!(nvm.save(&name("third"), &c).await.unwrap().0, Slot::A);
             let Ok(BootImage::Slot(Slot::A, h)) = nvm.boot_image(&mut buf).await else {
                 panic!()
             };
@@ -566,8 +432,7 @@ mod tests {
             nvm.choose_built_in().await.unwrap();
             assert_eq!(nvm.boot_image(&mut buf).await, Ok(BootImage::BuiltIn));
             assert_eq!(
-                nvm.save(&name("huge"), &vec![0; SLOT_IMAGE_MAX + 1], &mut buf)
-                    .await,
+                nvm.save(&name("huge"), &vec![0; SLOT_IMAGE_MAX + 1]).await,
                 Err(NvmError::TooLong(SLOT_IMAGE_MAX as u32 + 1))
             );
         });
@@ -580,8 +445,8 @@ mod tests {
         block_on(async {
             let a = image(1, 300);
             let b = image(2, 400);
-            nvm.save(&name("a"), &a, &mut buf).await.unwrap();
-            nvm.save(&name("b"), &b, &mut buf).await.unwrap();
+            nvm.save(&name("a"), &a).await.unwrap();
+            nvm.save(&name("b"), &b).await.unwrap();
             let mut flash = nvm.into_inner();
             // A bit of slot B's image flips: B fails its CRC, A is taken.
             flash.bytes[(SLOT_B.start as usize) + HEADER + 10] ^= 4;
@@ -709,13 +574,9 @@ mod tests {
         let new = other_image();
         let steps = at_every_cut(
             |nvm| {
-                let mut buf = vec![0u8; SLOT_IMAGE_MAX];
-                block_on(nvm.save(&name("old"), &old, &mut buf)).unwrap();
+                block_on(nvm.save(&name("old"), &old)).unwrap();
             },
-            |nvm| {
-                let mut buf = vec![0u8; SLOT_IMAGE_MAX];
-                block_on(nvm.save(&name("new"), &new, &mut buf)).is_ok()
-            },
+            |nvm| block_on(nvm.save(&name("new"), &new)).is_ok(),
             |nvm, cut| {
                 let mut buf = vec![0u8; SLOT_IMAGE_MAX];
                 let len = match block_on(nvm.boot_image(&mut buf)).unwrap() {

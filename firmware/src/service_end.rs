@@ -9,6 +9,11 @@
 //! the engine what was posted for it and publishes what it runs ([`Mailbox::serve`]).
 //! They meet in the [`Mailbox`], under a critical section held for a few instructions.
 //!
+//! Writes of the flash ([`crate::nvm`]: saving a detector to a slot, writing a key)
+//! happen only in the service state, which the tool asks for first: the detector task
+//! takes the engine out of service at its next tick ([`Engine::set_service`]), and a
+//! write is refused until it has (the flash stalls the CPU, ticks included).
+//!
 //! Two detectors take turns: the one in service and a spare. A load goes into the spare;
 //! the engine takes it at its phase boundary and sends the one it replaced back as the
 //! next spare. While a loaded detector waits for its boundary there is no spare, and a
@@ -19,11 +24,16 @@ use core::cell::RefCell;
 use detector_core::Detector;
 use detector_core::DetectorTick;
 use embassy_sync::blocking_mutex::Mutex;
-use fingertip_can::service::{DetectorName, ErrorCode, Identity, Mode, Request, Response, detail};
+use embedded_storage_async::nor_flash::NorFlash;
+use fingertip_can::service::{
+    DetectorName, ErrorCode, Identity, Key, Mode, Request, Response, detail,
+};
 use fingertip_can::transfer::{MAX_MESSAGE, Payload, Reassembler, Received, SINGLE_MAX, Sender};
 
+use crate::calib::Calibration;
 use crate::engine::{Engine, Service};
 use crate::load::{LoadError, Loader, Staged};
+use crate::nvm::Nvm;
 use crate::shared::RawMutex;
 use crate::version::VERSION;
 
@@ -39,6 +49,8 @@ struct Published {
     crc: u32,
     name: DetectorName,
     staged: Option<u32>,
+    /// The engine is in the service state.
+    service: bool,
 }
 
 struct Inner<'d> {
@@ -47,6 +59,8 @@ struct Inner<'d> {
     /// Replaced by the engine, for the loader.
     retired: Option<&'d mut Detector>,
     activate: bool,
+    /// The service state asked for.
+    service: bool,
     published: Published,
 }
 
@@ -66,11 +80,13 @@ impl<'d> Mailbox<'d> {
             posted: None,
             retired: None,
             activate: false,
+            service: false,
             published: Published {
                 mode: Mode::BuiltIn,
                 crc: 0,
                 name: DetectorName::new(),
                 staged: None,
+                service: false,
             },
         })))
     }
@@ -108,6 +124,8 @@ impl<'d> Inner<'d> {
         if let Some(d) = engine.take_retired() {
             self.retired = Some(d);
         }
+        engine.set_service(self.service);
+        self.published.service = engine.in_service_state();
         let (mode, crc, name) = engine.in_service();
         let p = &mut self.published;
         p.staged = engine.staged_crc();
@@ -119,23 +137,117 @@ impl<'d> Inner<'d> {
     }
 }
 
-/// Carries out requests: the receive side's handler.
-pub struct Requests<'m, 'd> {
+/// Carries out requests: the receive side's handler, with the board's flash.
+pub struct Requests<'m, 'd, F> {
     loader: Loader<'d>,
     mailbox: &'m Mailbox<'d>,
+    nvm: Nvm<F>,
 }
 
-impl<'m, 'd> Requests<'m, 'd> {
+/// A failed request's response.
+fn error(code: ErrorCode, args: core::fmt::Arguments<'_>) -> Response {
+    Response::Error(code, detail(args))
+}
+
+/// Whether `value` may be written to `key`: a node id within 0..=14, a calibration
+/// parameter within [`Calibration::new`]'s ranges.
+fn check_key(key: Key, value: [u8; 4]) -> Result<(), Response> {
+    match key {
+        Key::NodeId => match u32::from_le_bytes(value) {
+            0..=14 => Ok(()),
+            v => Err(error(
+                ErrorCode::Key,
+                format_args!("node_id {v} is not within 0..=14"),
+            )),
+        },
+        Key::Calibration { parameter, .. } => {
+            let v = f32::from_le_bytes(value);
+            // The parameter alone, the others at values the ranges take.
+            let mut p = [1.0, 2048.0, 0.0, 25.0];
+            p[parameter as usize] = v;
+            Calibration::new(p[0], p[1], p[2], p[3])
+                .map(|_| ())
+                .map_err(|e| error(ErrorCode::Key, format_args!("{key}: {e}")))
+        }
+    }
+}
+
+impl<'m, 'd, F: NorFlash> Requests<'m, 'd, F> {
     /// Requests served with `loader`'s spare detector, meeting the detector task in
-    /// `mailbox`.
-    pub fn new(loader: Loader<'d>, mailbox: &'m Mailbox<'d>) -> Requests<'m, 'd> {
-        Requests { loader, mailbox }
+    /// `mailbox`, keeping what must last in `nvm`.
+    pub fn new(loader: Loader<'d>, mailbox: &'m Mailbox<'d>, nvm: Nvm<F>) -> Requests<'m, 'd, F> {
+        Requests {
+            loader,
+            mailbox,
+            nvm,
+        }
+    }
+
+    /// The flash.
+    pub fn nvm(&mut self) -> &mut Nvm<F> {
+        &mut self.nvm
+    }
+
+    /// Whether the engine is in the service state (a flash write may go), else the
+    /// response refusing one.
+    fn writable(&self) -> Result<(), Response> {
+        if self.mailbox.with(|i| i.published.service) {
+            Ok(())
+        } else {
+            Err(error(
+                ErrorCode::NotInService,
+                format_args!("enter the service state first"),
+            ))
+        }
+    }
+
+    /// Checks and stages an image (see [`Loader::stage`]); the same image again is
+    /// already staged.
+    fn stage(&mut self, name: &str, image: &[u8]) -> Result<u32, Response> {
+        let crc = crate::checksum::crc32(image);
+        let (retired, mode, waiting) = self.mailbox.with(|i| {
+            let waiting = i.posted.as_ref().map(|s| s.crc).or(i.published.staged);
+            (i.retired.take(), i.published.mode, waiting)
+        });
+        if let Some(d) = retired {
+            self.loader.give_back(d);
+        }
+        // The same image again (the tool retries when the answer was lost).
+        if waiting == Some(crc) {
+            return Ok(crc);
+        }
+        if mode == Mode::Fallback {
+            return Err(error(
+                ErrorCode::Busy,
+                format_args!("the detector is out of service (fallback)"),
+            ));
+        }
+        match self.loader.stage(name, image) {
+            Ok(staged) => {
+                self.mailbox.with(|i| i.posted = Some(staged));
+                Ok(crc)
+            }
+            Err(e) => {
+                let code = match e {
+                    LoadError::Busy => ErrorCode::Busy,
+                    LoadError::Name => ErrorCode::Malformed,
+                    LoadError::Image(_) | LoadError::Rate(_) => ErrorCode::Image,
+                    LoadError::Channel(_) => ErrorCode::Channel,
+                };
+                Err(error(code, format_args!("{e}")))
+            }
+        }
     }
 
     /// Carries out one request.
-    pub fn handle(&mut self, request: Request<'_>) -> Response {
-        let error = |code, args| Response::Error(code, detail(args));
-        match request {
+    pub async fn handle(&mut self, request: Request<'_>) -> Response {
+        match self.carry_out(request).await {
+            Ok(r) | Err(r) => r,
+        }
+    }
+
+    async fn carry_out(&mut self, request: Request<'_>) -> Result<Response, Response> {
+        Ok(match request {
             Request::Identify => {
                 let p = self.mailbox.with(|i| {
                     let mut p = i.published.clone();
@@ -151,40 +263,20 @@ impl<'m, 'd> Requests<'m, 'd> {
                     staged_crc: p.staged,
                 })
             }
-            Request::Load { name, image } => {
-                let crc = crate::checksum::crc32(image);
-                let (retired, mode, waiting) = self.mailbox.with(|i| {
-                    let waiting = i.posted.as_ref().map(|s| s.crc).or(i.published.staged);
-                    (i.retired.take(), i.published.mode, waiting)
-                });
-                // The same image again (the tool retries when the answer was lost): it
-                // is already staged.
-                if waiting == Some(crc) {
-                    return Response::Staged(crc);
-                }
-                if let Some(d) = retired {
-                    self.loader.give_back(d);
-                }
-                if mode == Mode::Fallback {
-                    return error(
-                        ErrorCode::Busy,
-                        format_args!("the detector is out of service (fallback)"),
-                    );
-                }
-                match self.loader.stage(name, image) {
-                    Ok(staged) => {
-                        self.mailbox.with(|i| i.posted = Some(staged));
-                        Response::Staged(crc)
-                    }
-                    Err(e) => {
-                        let code = match e {
-                            LoadError::Busy => ErrorCode::Busy,
-                            LoadError::Name => ErrorCode::Malformed,
-                            LoadError::Image(_) | LoadError::Rate(_) => ErrorCode::Image,
-                            LoadError::Channel(_) => ErrorCode::Channel,
-                        };
-                        error(code, format_args!("{e}"))
-                    }
+            Request::Load { name, image } => Response::Staged(self.stage(name, image)?),
+            Request::Save { name, image } => {
+                self.writable()?;
+                let crc = self.stage(name, image)?;
+                let name = DetectorName::try_from(name).unwrap_or_default();
+                let (slot, stall_us) = self
+                    .nvm
+                    .save(&name, image)
+                    .await
+                    .map_err(|e| error(ErrorCode::Store, format_args!("{e}")))?;
+                Response::Saved {
+                    crc,
+                    slot: slot.raw() as u8,
+                    stall_ms: u16::try_from(stall_us.div_ceil(1000)).unwrap_or(u16::MAX),
                 }
             }
             Request::Activate => {
@@ -195,17 +287,39 @@ impl<'m, 'd> Requests<'m, 'd> {
                 });
                 match staged {
                     Some(crc) => Response::Active(crc),
-                    None => error(
-                        ErrorCode::NothingStaged,
-                        format_args!("load a detector first"),
-                    ),
+                    None => {
+                        return Err(error(
+                            ErrorCode::NothingStaged,
+                            format_args!("load a detector first"),
+                        ));
+                    }
                 }
             }
-            Request::ReadKey(k) | Request::WriteKey(k, _) => error(
-                ErrorCode::Store,
-                format_args!("no key-value store on this firmware: {k}"),
-            ),
-        }
+            Request::EnterService | Request::LeaveService => {
+                let on = request == Request::EnterService;
+                self.mailbox.with(|i| i.service = on);
+                Response::Done
+            }
+            Request::ReadKey(k) => match self.nvm.read_key(k.raw()).await {
+                Ok(Some(v)) => Response::Value(v),
+                Ok(None) => {
+                    return Err(error(
+                        ErrorCode::Key,
+                        format_args!("`{k}` was never written"),
+                    ));
+                }
+                Err(e) => return Err(error(ErrorCode::Store, format_args!("{e}"))),
+            },
+            Request::WriteKey(k, v) => {
+                self.writable()?;
+                check_key(k, v)?;
+                self.nvm
+                    .write_key(k.raw(), v)
+                    .await
+                    .map_err(|e| error(ErrorCode::Store, format_args!("{e}")))?;
+                Response::Written
+            }
+        })
     }
 }
 
@@ -231,11 +345,11 @@ impl ServiceEnd {
 
     /// A frame on the node's request identifier at `now_us`: what to send on its
     /// response identifier (a flow control, or the response), if anything.
-    pub fn on_frame(
+    pub async fn on_frame<F: NorFlash>(
         &mut self,
         data: &[u8],
         now_us: u64,
-        requests: &mut Requests<'_, '_>,
+        requests: &mut Requests<'_, '_, F>,
     ) -> Option<Payload> {
         match self.rx.on_frame(data, now_us) {
             Received::Pending | Received::Failed(_, None) => None,
@@ -246,7 +360,7 @@ impl ServiceEnd {
                 // the code it arrived with, which the tool matches against its own.
                 let code = message.first().copied().unwrap_or(0);
                 let response = match Request::decode(message) {
-                    Ok(r) => requests.handle(r),
+                    Ok(r) => requests.handle(r).await,
                     Err(e) => {
                         let code = match e {
                             fingertip_can::service::ServiceError::Corrupt => ErrorCode::Corrupt,

@@ -22,13 +22,16 @@ use std::collections::VecDeque;
 use critical_section as _;
 
 use detector_core::Detector;
+use embassy_futures::block_on;
 use fingertip::can_tools::busload::fd_frame_bits;
 use fingertip::can_tools::service::{Client, Link};
-use fingertip_can::service::{ErrorCode, Mode, Request, Response, crc32};
+use fingertip_can::service::{ErrorCode, Key, Mode, Request, Response, crc32};
 use fingertip_can::{BusFormat, NodeId, NodeIdSource, ResetReason};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{BoardInfo, Health, Service};
+use firmware::flash_sim::SimFlash;
 use firmware::load::Loader;
+use firmware::nvm::{BootImage, Nvm, Slot};
 use firmware::sampling::AdcSample;
 use firmware::service_end::{Mailbox, Requests, ServiceEnd};
 use firmware::shared::RxShared;
@@ -57,7 +60,7 @@ enum Fault {
 struct Fingertip {
     service: Service<'static, ApproachTick>,
     end: ServiceEnd,
-    requests: Requests<'static, 'static>,
+    requests: Requests<'static, 'static, &'static mut SimFlash>,
     mailbox: &'static Mailbox<'static>,
     rx: RxShared,
     tick: u32,
@@ -83,7 +86,11 @@ impl Fingertip {
         Fingertip {
             service,
             end: ServiceEnd::new(),
-            requests: Requests::new(loader, mailbox),
+            requests: Requests::new(
+                loader,
+                mailbox,
+                Nvm::new(Box::leak(Box::new(SimFlash::new()))),
+            ),
             mailbox,
             rx: RxShared::new(),
             tick: 0,
@@ -191,7 +198,7 @@ impl Bus {
             if down {
                 let now = self.now_us as u64;
                 let f = &mut self.fingertip;
-                if let Some(answer) = f.end.on_frame(&data, now, &mut f.requests) {
+                if let Some(answer) = block_on(f.end.on_frame(&data, now, &mut f.requests)) {
                     self.up
                         .push_back((answer.data().to_vec(), self.now_us + REACTION_US as f64));
                 }
@@ -415,4 +422,91 @@ fn any_frame_lost_or_corrupted_is_retried_or_fails_and_nothing_half_loaded_runs(
         2 * frames
     );
     assert!(retried >= frames, "most faults must need a retry");
+}
+
+/// Sends `request` and returns the answer, the exchange retried as needed.
+fn ask(client: &mut Client<Bus>, request: Request<'_>) -> Response {
+    client.request(&request).unwrap()
+}
+
+#[test]
+fn flash_writes_wait_for_the_service_state_and_outlast_a_reboot() {
+    let image = image_5k();
+    let mut client = Client::new(Bus::new(Fingertip::new()));
+    let key = Key::parse("force_x.gain").unwrap();
+    let gain = (20.0f32 / 4096.0).to_le_bytes();
+    // Outside the service state: refused, nothing written.
+    let save = Request::Save {
+        name: "fitted",
+        image: &image,
+    };
+    assert!(matches!(
+        ask(&mut client, save),
+        Response::Error(ErrorCode::NotInService, _)
+    ));
+    assert!(matches!(
+        ask(&mut client, Request::WriteKey(key, gain)),
+        Response::Error(ErrorCode::NotInService, _)
+    ));
+    assert!(matches!(
+        ask(&mut client, Request::ReadKey(key)),
+        Response::Error(ErrorCode::Key, _)
+    ));
+    // In it: the detector out of service (heartbeats say so), then the writes.
+    assert_eq!(ask(&mut client, Request::EnterService), Response::Done);
+    let link = client.link();
+    let end = link.now_us + 1000.0;
+    link.run(end);
+    let Service::Running(e) = &link.fingertip.service else {
+        panic!()
+    };
+    assert!(e.in_service_state());
+    assert!(
+        e.status()
+            .faults
+            .contains(fingertip_can::FaultFlags::SERVICE)
+    );
+    let Response::Saved {
+        crc,
+        slot,
+        stall_ms,
+    } = ask(&mut client, save)
+    else {
+        panic!()
+    };
+    assert_eq!((crc, slot), (crc32(&image), 1));
+    // A 4.4 kB image: 5 pages erased and 560 double words at most.
+    assert!((120..=200).contains(&stall_ms), "{stall_ms} ms");
+    assert_eq!(
+        ask(&mut client, Request::WriteKey(key, gain)),
+        Response::Written
+    );
+    assert!(matches!(
+        ask(&mut client, Request::WriteKey(Key::NodeId, 15u32.to_le_bytes())),
+        Response::Error(ErrorCode::Key, text) if text.contains("node_id 15")
+    ));
+    assert!(matches!(
+        ask(&mut client, Request::WriteKey(key, 0.0f32.to_le_bytes())),
+        Response::Error(ErrorCode::Key, text) if text.contains("gain")
+    ));
+    assert_eq!(
+        ask(&mut client, Request::ReadKey(key)),
+        Response::Value(gain)
+    );
+    assert_eq!(ask(&mut client, Request::LeaveService), Response::Done);
+    let link = client.link();
+    let end = link.now_us + 1000.0;
+    link.run(end);
+    let Service::Running(e) = &link.fingertip.service else {
+        panic!()
+    };
+    assert!(!e.in_service_state());
+    // After a reboot the flash holds the saved detector in slot A.
+    let nvm = link.fingertip.requests.nvm();
+    let mut buf = vec![0u8; firmware::nvm::SLOT_IMAGE_MAX];
+    let Ok(BootImage::Slot(Slot::A, h)) = block_on(nvm.boot_image(&mut buf)) else {
+        panic!()
+    };
+    assert_eq!((h.crc, h.name.as_str()), (crc32(&image), "fitted"));
+    assert_eq!(block_on(nvm.read_key(key.raw())), Ok(Some(gain)));
 }
