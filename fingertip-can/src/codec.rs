@@ -1009,7 +1009,9 @@ impl FaultFlags {
     /// A frame could not be queued or was flushed since the last heartbeat.
     pub const TX_DROPPED: FaultFlags = FaultFlags(1 << 5);
     /// The detector image was rejected (or the tick does not match it): the detector is out
-    /// of service and the fingertip sends only its status heartbeat.
+    /// of service and the fingertip sends only its status heartbeat; or a detector saved
+    /// in flash was chosen but none is whole, and the built-in one runs in its place
+    /// (status page 11 says which).
     pub const CONFIG_FALLBACK: FaultFlags = FaultFlags(1 << 6);
     /// A sensor channel is flagged faulty.
     pub const SENSOR_FAULT: FaultFlags = FaultFlags(1 << 7);

@@ -411,6 +411,13 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         self
     }
 
+    /// Raises [`FaultFlags::CONFIG_FALLBACK`] in every heartbeat: a detector saved in
+    /// flash was chosen but none is whole, and this one runs in its place.
+    pub fn with_config_fallback(mut self) -> Engine<'d, T> {
+        self.status.faults.set(FaultFlags::CONFIG_FALLBACK, true);
+        self
+    }
+
     /// The detector this engine runs.
     pub fn detector(&self) -> &Detector {
         self.detector

@@ -94,49 +94,56 @@ impl<'d> Loader<'d> {
         let mut n = DetectorName::new();
         n.push_str(name).map_err(|_| LoadError::Name)?;
         let detector = self.spare.take().ok_or(LoadError::Busy)?;
-        match self.check(detector, image) {
+        match check(detector, image, self.rate_hz) {
             Ok(()) => Ok(Staged {
                 crc: crc32(image),
-                detector: self.spare.take().ok_or(LoadError::Busy)?,
+                detector,
                 name: n,
             }),
-            Err(e) => Err(e),
+            Err(e) => {
+                self.spare = Some(detector);
+                Err(e)
+            }
         }
-    }
-
-    /// Loads into `detector` and checks it; keeps it as the spare either way (emptied on
-    /// error).
-    fn check(&mut self, detector: &'d mut Detector, image: &[u8]) -> Result<(), LoadError> {
-        let result = detector
-            .load_image(image)
-            .map_err(LoadError::Image)
-            .and_then(|()| {
-                if let Some(c) = detector
-                    .channels()
-                    .iter()
-                    .find(|c| !ALL_CHANNELS.contains(&c.as_str()))
-                {
-                    return Err(LoadError::Channel(c.clone()));
-                }
-                let rate = detector.rate_hz();
-                let error = (f64::from(rate) - f64::from(self.rate_hz)).abs();
-                if error * 1e6 > f64::from(MAX_RATE_ERROR_PPM) * f64::from(self.rate_hz) {
-                    return Err(LoadError::Rate(rate));
-                }
-                Ok(())
-            });
-        if result.is_err() {
-            *detector = Detector::empty();
-        }
-        self.spare = Some(detector);
-        result
     }
 }
 
+/// Loads `image` into `detector` in place and checks it for a board sampling at
+/// `rate_hz` (see the module's header); on error `detector` is left empty.
+pub fn check(detector: &mut Detector, image: &[u8], rate_hz: f32) -> Result<(), LoadError> {
+    let result = detector
+        .load_image(image)
+        .map_err(LoadError::Image)
+        .and_then(|()| {
+            if let Some(c) = detector
+                .channels()
+                .iter()
+                .find(|c| !ALL_CHANNELS.contains(&c.as_str()))
+            {
+                return Err(LoadError::Channel(c.clone()));
+            }
+            let rate = detector.rate_hz();
+            let error = (f64::from(rate) - f64::from(rate_hz)).abs();
+            if error * 1e6 > f64::from(MAX_RATE_ERROR_PPM) * f64::from(rate_hz) {
+                return Err(LoadError::Rate(rate));
+            }
+            Ok(())
+        });
+    if result.is_err() {
+        *detector = Detector::empty();
+    }
+    result
+}
+
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::boot::DETECTOR_IMAGE;
+
+    /// The image of a small detector of the board's, other than the embedded one.
+    pub(crate) fn small_image() -> Vec<u8> {
+        image_of(SMALL)
+    }
 
     fn image_of(toml: &str) -> Vec<u8> {
         let config = detector_build::Config::from_toml(toml).unwrap();

@@ -35,12 +35,15 @@
 use core::ops::Range;
 
 use embedded_storage_async::nor_flash::NorFlash;
-use fingertip_can::service::{DetectorName, NAME_MAX};
+use fingertip_can::service::{CalibrationParameter, DetectorName, Key, NAME_MAX};
 use sequential_storage::cache::{Cache, Uncached};
 use sequential_storage::map::{MapConfig, MapStorage};
 
+use crate::calib::Calibration;
+use crate::channel_set::ChannelSet;
 use crate::checksum::crc32;
 use crate::flash_map::{PAGE, SLOT_A, SLOT_B, STORE, WRITE};
+use crate::wiring::ADC_CHANNELS;
 
 /// The store's key of the slot chosen at the last save: 0 none (the built-in detector),
 /// 1 slot A, 2 slot B (`u32`).
@@ -252,6 +255,47 @@ impl<F: NorFlash> Nvm<F> {
         Ok(())
     }
 
+    /// The node id the store holds, if any (as written: [`crate::node_id::resolve`]
+    /// checks its range).
+    pub async fn node_id(&mut self) -> Result<Option<u8>, NvmError> {
+        Ok(self
+            .read_key(Key::NodeId.raw())
+            .await?
+            .map(|v| u8::try_from(u32::from_le_bytes(v)).unwrap_or(u8::MAX)))
+    }
+
+    /// Each analog channel's calibration: `nominal`'s, with the parameters the store
+    /// holds in their place. A channel whose parameters together are not a calibration
+    /// keeps its nominal one and is named in the set returned.
+    pub async fn calibration(
+        &mut self,
+        nominal: &[Calibration; ADC_CHANNELS.len()],
+    ) -> Result<([Calibration; ADC_CHANNELS.len()], ChannelSet), NvmError> {
+        let mut out = *nominal;
+        let mut refused = ChannelSet::EMPTY;
+        for (c, (cal, nom)) in out.iter_mut().zip(nominal).enumerate() {
+            let mut p = [nom.gain(), nom.zero(), nom.drift(), nom.t_ref()].map(|v| v as f32);
+            let mut stored = false;
+            for parameter in CalibrationParameter::ALL {
+                let key = Key::Calibration {
+                    channel: c as u8,
+                    parameter,
+                };
+                if let Some(v) = self.read_key(key.raw()).await? {
+                    p[parameter as usize] = f32::from_le_bytes(v);
+                    stored = true;
+                }
+            }
+            if stored {
+                match Calibration::new(p[0], p[1], p[2], p[3]) {
+                    Ok(k) => *cal = k,
+                    Err(_) => refused.insert(c),
+                }
+            }
+        }
+        Ok((out, refused))
+    }
+
     /// The slot chosen at the last save, if any.
     pub async fn active_slot(&mut self) -> Result<Option<Slot>, NvmError> {
         Ok(self
@@ -405,6 +449,43 @@ mod tests {
     }
 
     #[test]
+    fn the_stores_calibration_and_node_id_replace_the_nominal_ones() {
+        use crate::calib::NOMINAL;
+        let mut nvm = Nvm::new(SimFlash::new());
+        block_on(async {
+            assert_eq!(nvm.node_id().await, Ok(None));
+            assert_eq!(
+                nvm.calibration(&NOMINAL).await,
+                Ok((NOMINAL, ChannelSet::EMPTY))
+            );
+            let key = |channel, parameter| Key::Calibration { channel, parameter }.raw();
+            nvm.write_key(Key::NodeId.raw(), 9u32.to_le_bytes())
+                .await
+                .unwrap();
+            nvm.write_key(key(1, CalibrationParameter::Gain), 0.005f32.to_le_bytes())
+                .await
+                .unwrap();
+            nvm.write_key(key(1, CalibrationParameter::Zero), 2000.5f32.to_le_bytes())
+                .await
+                .unwrap();
+            // Channel 3's gain made 0 behind the checks of the service channel.
+            nvm.write_key(key(3, CalibrationParameter::Gain), 0f32.to_le_bytes())
+                .await
+                .unwrap();
+            assert_eq!(nvm.node_id().await, Ok(Some(9)));
+            let (cal, refused) = nvm.calibration(&NOMINAL).await.unwrap();
+            assert_eq!(refused, ChannelSet::from_bits(0b1000));
+            assert_eq!(
+                [cal[0], cal[2], cal[3]],
+                [NOMINAL[0], NOMINAL[2], NOMINAL[3]]
+            );
+            assert!((cal[1].gain() - 0.005).abs() < 1e-7);
+            assert!((cal[1].zero() - 2000.5).abs() < 1e-3);
+            assert_eq!(cal[1].drift(), NOMINAL[1].drift());
+        });
+    }
+
+    #[test]
     fn saves_alternate_slots_and_boot_takes_the_chosen_one() {
         let mut nvm = Nvm::new(SimFlash::new());
         let mut buf = vec![0u8; SLOT_IMAGE_MAX];
@@ -549,29 +630,10 @@ mod tests {
         );
     }
 
-    /// A detector of the board's other than the embedded one.
-    fn other_image() -> Vec<u8> {
-        let toml = r#"
-            rate_hz = 5000.0
-            channel = [{ name = "force_x", unit = "N" }]
-            feature = [{ name = "push", stage = { raw = { input = "force_x" } } }]
-            [[event]]
-            name = "press"
-            sensor = [{ feature = "push", weight = 1.0, cdf = { binary = { threshold = -0.5, above = false } } }]
-            alert = { on = 0.5, off = 0.3 }
-            confirm = { on = 0.75, off = 0.5 }
-            [[phase]]
-            name = "approach"
-            events = ["press"]
-        "#;
-        let config = detector_build::Config::from_toml(toml).unwrap();
-        detector_build::compile(&config).unwrap().image()
-    }
-
     #[test]
     fn a_save_cut_anywhere_boots_the_old_detector_or_the_new_one() {
         let old = crate::boot::DETECTOR_IMAGE.to_vec();
-        let new = other_image();
+        let new = crate::load::tests::small_image();
         let steps = at_every_cut(
             |nvm| {
                 block_on(nvm.save(&name("old"), &old)).unwrap();

@@ -561,7 +561,7 @@ fn status(node: NodeId) -> MessageDef {
         "A tick ended after its deadline, or scans were lost, since the last heartbeat",
         "CAN controller error-passive or bus-off since the last heartbeat",
         "A frame could not be queued, or was flushed, since the last heartbeat",
-        "Detector image rejected: detector out of service, status heartbeats only",
+        "Detector image rejected: detector out of service, status heartbeats only; or no saved detector whole: the built-in one runs (DetectorMode)",
         "A sensor channel is flagged faulty",
         "Crystal not running: internal oscillator, outside the CAN FD data phase's tolerance",
         "Service state (flash being written): detector out of service, status heartbeats only",
