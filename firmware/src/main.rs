@@ -34,9 +34,12 @@ use cortex_m::peripheral::SCB;
 use cortex_m_rt::{entry, exception};
 use defmt::{error, info, warn};
 
+use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_executor::{Executor, InterruptExecutor, Spawner};
+use embassy_futures::block_on;
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Input, Pull};
 use embassy_stm32::i2c::{self, I2c, Master};
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -59,6 +62,7 @@ use fingertip_can::{BusFormat, Receiver};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{BoardInfo, Service, TickRunner};
 use firmware::node_id::{self, NodeIdError};
+use firmware::nvm::{BootImage, Nvm, SLOT_IMAGE_MAX};
 use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
 use firmware::shared::{
     BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
@@ -327,15 +331,22 @@ fn setup() -> Board {
     } else {
         warn!("the crystal did not start: running from the internal oscillator");
     }
-    // The node id, at run time: one image serves every finger. The flash key-value
-    // store's `node_id` key goes where `None` stands (the store is not on the board yet).
+    // What the board keeps in flash: its node id, its calibration, a saved detector. A
+    // store that cannot be read leaves the straps, the nominal calibration and the
+    // built-in detector.
+    let mut nvm: BoardNvm = Nvm::new(BlockingAsync::new(Flash::new_blocking(p.FLASH)));
+    let stored_node = block_on(nvm.node_id()).unwrap_or_else(|e| {
+        error!("flash store: {}: node id from the straps", e);
+        None
+    });
+    // The node id, at run time: one image serves every finger; the store's first.
     let straps = read_straps([
         Input::new(p.PB4, Pull::Up),
         Input::new(p.PB5, Pull::Up),
         Input::new(p.PB6, Pull::Up),
         Input::new(p.PB7, Pull::Up),
     ]);
-    let (node, node_source) = match node_id::resolve(None, straps) {
+    let (node, node_source) = match node_id::resolve(stored_node, straps) {
         Ok(found) => found,
         Err(e) => without_node_id(e),
     };
@@ -367,7 +378,22 @@ fn setup() -> Board {
 
     // The detector before anything else is built on the stack: loading the image is the
     // deepest stack of the firmware.
-    let service = build_detector(board);
+    let service = build_detector(board, &mut nvm);
+    let calibration = match block_on(nvm.calibration(&calib::NOMINAL)) {
+        Ok((c, refused)) => {
+            if !refused.is_empty() {
+                error!(
+                    "flash store: the calibration of channels {=u32:#06b} is not one: nominal kept",
+                    refused.bits()
+                );
+            }
+            c
+        }
+        Err(e) => {
+            error!("flash store: {}: nominal calibration", e);
+            calib::NOMINAL
+        }
+    };
     let rate_hz = service.rate_hz();
     match service.fallback_reason() {
         None => info!("detector in service"),
@@ -514,7 +540,7 @@ fn setup() -> Board {
         receiver,
         adc: ring,
         timer,
-        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
+        front_end: FrontEnd::new(calibration, rate_hz),
         sensor,
         can_rx: can_rx_half,
         can_properties: properties,
@@ -522,15 +548,47 @@ fn setup() -> Board {
     }
 }
 
-/// The detector task's service: the detector loaded from the embedded image straight
-/// into its static and the engine running the generated tick, or the fallback when the
-/// image is rejected or is not the tick's (the CRC of the image actually loaded is
-/// checked). In a static, not moved into the task: an async task's arguments are stored
-/// in its future twice (as arguments and as locals), and the engine is 3 KiB.
+/// The board's flash: the detector slots and the store.
+type BoardNvm = Nvm<BlockingAsync<Flash<'static, Blocking>>>;
+
+/// The detector task's service: the detector saved in flash, through the interpreter
+/// (checked as one received over the bus), or the embedded image's through the generated
+/// tick (the CRC of the image actually loaded is checked), or the fallback when the
+/// image is rejected or is not the tick's; `FaultConfigFallback` when a saved detector
+/// was chosen but cannot run ([`boot::start_saved`]). In a static, not moved into the
+/// task: an async task's arguments are stored in its future twice (as arguments and as
+/// locals), and the engine is 3 KiB.
 #[inline(never)]
-fn build_detector(board: BoardInfo) -> &'static mut Service<'static, ApproachTick> {
+fn build_detector(
+    board: BoardInfo,
+    nvm: &mut BoardNvm,
+) -> &'static mut Service<'static, ApproachTick> {
     let detector = DETECTOR.take();
-    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, board))
+    // The saved image is read onto the boot stack, gone before the tasks run.
+    let mut image = [0u8; SLOT_IMAGE_MAX];
+    let found = block_on(nvm.boot_image(&mut image)).unwrap_or_else(|e| {
+        error!("flash store: {}: the built-in detector", e);
+        BootImage::BuiltIn
+    });
+    let name;
+    let saved = match &found {
+        BootImage::BuiltIn => boot::Saved::None,
+        BootImage::Slot(slot, header) => {
+            info!(
+                "detector `{=str}` saved in slot {}, crc32 {=u32:#010x}",
+                header.name.as_str(),
+                slot,
+                header.crc
+            );
+            name = header.name.clone();
+            boot::Saved::Image(&image[..header.len as usize], &name)
+        }
+        BootImage::Fallback => {
+            error!("no saved detector is whole: the built-in one (FaultConfigFallback)");
+            boot::Saved::Broken
+        }
+    };
+    SERVICE.init_with(|| boot::start_saved(detector, saved, board))
 }
 
 /// The reading of the scans: the ADC and its trigger (kept alive for the DMA), the front
