@@ -56,7 +56,12 @@ impl core::fmt::Display for LoadError {
             LoadError::Name => write!(f, "the name is longer than {NAME_MAX} bytes"),
             LoadError::Image(e) => write!(f, "{e}"),
             LoadError::Channel(c) => write!(f, "channel `{c}` has no source on the board"),
-            LoadError::Rate(r) => write!(f, "rate {r} Hz is not the board's sample rate"),
+            // Whole hertz: float formatting would cost the firmware 10 KiB of flash.
+            LoadError::Rate(r) => write!(
+                f,
+                "rate {} Hz is not the board's sample rate",
+                (*r + 0.5) as u32
+            ),
         }
     }
 }

@@ -37,6 +37,7 @@ use defmt::{error, info, warn};
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_executor::{Executor, InterruptExecutor, Spawner};
 use embassy_futures::block_on;
+use embassy_futures::select::{Either, select};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
 use embassy_stm32::flash::{Blocking, Flash};
@@ -50,20 +51,23 @@ use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt};
 use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
 use {defmt_rtt as _, panic_probe as _};
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use detector_core::Detector;
 use detector_core::Tick;
-use fingertip_can::{BusFormat, Receiver};
+use fingertip_can::{BusFormat, CanFrame, NodeId, Receiver};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{BoardInfo, Service, TickRunner};
+use firmware::load::Loader;
 use firmware::node_id::{self, NodeIdError};
 use firmware::nvm::{BootImage, Nvm, SLOT_IMAGE_MAX};
 use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
+use firmware::service_end::{Mailbox, Requests, ServiceEnd};
 use firmware::shared::{
     BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
     TemperatureHandle, WatchdogHandle,
@@ -142,6 +146,23 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::FDCAN1_IT0> for TxPump 
         TX.lock(|t| t.borrow_mut().pump(&mut regs::FdcanTx));
     }
 }
+
+/// A service-channel frame: its data and length.
+type ServiceFrame = ([u8; 64], u8);
+
+/// The spare detector a detector received over the bus is checked into.
+static SPARE: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
+/// Where the service task and the detector task meet.
+static MAILBOX: Mailbox<'static> = Mailbox::new();
+/// The service channel's end (its reassembly buffer is 8 KiB): in a static, made at boot
+/// (a `const` one would be 8 KiB of initialized data in flash).
+static SERVICE_END: StaticCell<ServiceEnd> = StaticCell::new();
+/// Frames on this node's request identifier, from the receive task to the service task.
+/// Full, a frame is dropped: the transfer breaks and the tool sends it again.
+static SERVICE_FRAMES: Channel<RawMutex, ServiceFrame, 4> = Channel::new();
+/// The receiver the receive task uses: a detector loaded at run time may have another
+/// phase count. Written by the detector task when it changes.
+static RECEIVER: Mutex<RawMutex, Cell<Option<Receiver>>> = Mutex::new(Cell::new(None));
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
@@ -242,6 +263,9 @@ struct Board {
     can_rx: CanRx<'static>,
     can_properties: Properties,
     watchdog: IndependentWatchdog<'static, IWDG>,
+    /// The service channel's handler: the loader, the flash.
+    requests: Requests<'static, 'static, BoardFlash>,
+    node: NodeId,
 }
 
 /// The clock security system saw the crystal stop: the core fell back to the internal
@@ -309,8 +333,12 @@ fn main() -> ! {
     executor.run(move |spawner: Spawner| {
         spawn!(spawner, temperature(b.sensor, sensor_handle));
         if let Some(receiver) = b.receiver {
-            spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
+            spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle, b.node));
         }
+        spawn!(
+            spawner,
+            service_task(SERVICE_END.init_with(ServiceEnd::new), b.requests, b.node)
+        );
         spawn!(spawner, can_supervisor(b.can_properties, bus));
         spawn!(spawner, watchdog_task(b.watchdog, watchdog));
     })
@@ -504,7 +532,7 @@ fn setup() -> Board {
         can.properties().set_standard_filter(
             StandardFilterSlot::_1,
             StandardFilter {
-                filter: FilterType::DedicatedSingle(part),
+                filter: FilterType::DedicatedDual(part, fingertip_can::service_request_id(node)),
                 action: Action::StoreInFifo0,
             },
         );
@@ -545,11 +573,15 @@ fn setup() -> Board {
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
+        requests: Requests::new(Loader::new(SPARE.take(), rate_hz as f32), &MAILBOX, nvm),
+        node,
     }
 }
 
+/// The board's flash, under embedded-storage's async traits.
+type BoardFlash = BlockingAsync<Flash<'static, Blocking>>;
 /// The board's flash: the detector slots and the store.
-type BoardNvm = Nvm<BlockingAsync<Flash<'static, Blocking>>>;
+type BoardNvm = Nvm<BoardFlash>;
 
 /// The detector task's service: the detector saved in flash, through the interpreter
 /// (checked as one received over the bus), or the embedded image's through the generated
@@ -623,6 +655,7 @@ async fn detector_task(
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
     let mut picker = ScanPicker::new();
     let mut last_masks = (0u8, 0u8);
+    let mut receiver = service.receiver();
     scans.adc.start();
     scans.timer.start();
     loop {
@@ -638,6 +671,9 @@ async fn detector_task(
         if torn {
             continue;
         }
+        // What the service task posted: a staged detector, activation, the service
+        // state; and what runs, published for it.
+        MAILBOX.serve(service);
         scans.front_end.set_temperature(h.temperature());
         let mut sample = scans.front_end.process(tick, &raw);
         sample.converted_at = SCANS.completed_at(tick);
@@ -651,6 +687,13 @@ async fn detector_task(
                 pushed
             })
         });
+
+        // A detector put in service may have another phase count: the receive task's
+        // receiver follows.
+        if service.receiver() != receiver {
+            receiver = service.receiver();
+            RECEIVER.lock(|r| r.set(receiver));
+        }
 
         // Logs, after the timed part.
         let out = &result.output;
@@ -701,13 +744,28 @@ async fn temperature(
     }
 }
 
-/// Hands every received frame to the protocol's receiver, stamped with the detector's tick.
+/// Hands every received frame to the protocol's receiver, stamped with the detector's tick;
+/// the service channel's requests go to the service task.
 #[embassy_executor::task]
-async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHandle<'static>) {
+async fn can_rx(
+    mut rx: CanRx<'static>,
+    receiver: Receiver,
+    mut shared: CanRxHandle<'static>,
+    node: NodeId,
+) {
+    let service = fingertip_can::service_request_id(node);
     loop {
         match rx.read_fd().await {
             Ok(envelope) => {
                 let frame = &envelope.frame;
+                if *frame.id() == fingertip_can::Id::Standard(service) {
+                    let mut data = [0u8; 64];
+                    let n = frame.data().len().min(64);
+                    data[..n].copy_from_slice(&frame.data()[..n]);
+                    let _ = SERVICE_FRAMES.try_send((data, n as u8));
+                    continue;
+                }
+                let receiver = RECEIVER.lock(|r| r.get()).unwrap_or(receiver);
                 // The decoding and the CRC outside the lock, which the detector shares:
                 // under it, only the counter rule and the new values.
                 let decoded = receiver.decode(*frame.id(), frame.data());
@@ -759,6 +817,42 @@ async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) 
         shared.set_bus_off(supervisor.bus_off());
         shared.set_state_events(supervisor.error_events().saturating_add(protocol_errors));
         ticker.next().await;
+    }
+}
+
+/// The service channel: reassembles requests, carries them out (checking and loading a
+/// detector, writing the flash in the service state), answers on the response
+/// identifier, at the status frames' priority.
+#[embassy_executor::task]
+async fn service_task(
+    end: &'static mut ServiceEnd,
+    mut requests: Requests<'static, 'static, BoardFlash>,
+    node: NodeId,
+) {
+    let response = fingertip_can::service_response_id(node);
+    loop {
+        let now = Instant::now().as_micros();
+        match select(
+            SERVICE_FRAMES.receive(),
+            embassy_time::Timer::after_millis(50),
+        )
+        .await
+        {
+            Either::First((data, len)) => {
+                let data = data.get(..usize::from(len)).unwrap_or(&[]);
+                let Some(answer) = end.on_frame(data, now, &mut requests).await else {
+                    continue;
+                };
+                if let Some(frame) = CanFrame::new_fd(response, answer.data()) {
+                    TX.lock(|t| {
+                        let mut t = t.borrow_mut();
+                        t.push(&[frame]);
+                        t.pump(&mut regs::FdcanTx);
+                    });
+                }
+            }
+            Either::Second(()) => end.poll(now),
+        }
     }
 }
 

@@ -356,13 +356,19 @@ impl<F: NorFlash> Nvm<F> {
             }
         }
         let r = slot.range();
-        self.flash
-            .erase(r.start, r.end)
-            .await
-            .map_err(|_| NvmError::Flash)?;
+        // A page at a time, and the image a few milliseconds at a time, letting the
+        // other tasks run in between (the watchdog's among them): a blocking flash driver
+        // holds the CPU for the whole of one call.
+        for page in (r.start..r.end).step_by(PAGE as usize) {
+            self.flash
+                .erase(page, page + PAGE)
+                .await
+                .map_err(|_| NvmError::Flash)?;
+            embassy_futures::yield_now().await;
+        }
         // The image in whole double words (the last padded as erased flash reads).
         let mut at = r.start + HEADER as u32;
-        for chunk in image.chunks(WRITE as usize) {
+        for (k, chunk) in image.chunks(WRITE as usize).enumerate() {
             let mut word = [0xFF; WRITE as usize];
             word[..chunk.len()].copy_from_slice(chunk);
             self.flash
@@ -370,6 +376,9 @@ impl<F: NorFlash> Nvm<F> {
                 .await
                 .map_err(|_| NvmError::Flash)?;
             at += WRITE;
+            if k % 64 == 63 {
+                embassy_futures::yield_now().await;
+            }
         }
         let header = SlotHeader {
             sequence,

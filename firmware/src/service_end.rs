@@ -30,7 +30,7 @@ use fingertip_can::service::{
 };
 use fingertip_can::transfer::{MAX_MESSAGE, Payload, Reassembler, Received, SINGLE_MAX, Sender};
 
-use crate::calib::Calibration;
+use crate::calib::{Calibration, CalibrationError};
 use crate::engine::{Engine, Service};
 use crate::load::{LoadError, Loader, Staged};
 use crate::nvm::Nvm;
@@ -165,9 +165,19 @@ fn check_key(key: Key, value: [u8; 4]) -> Result<(), Response> {
             // The parameter alone, the others at values the ranges take.
             let mut p = [1.0, 2048.0, 0.0, 25.0];
             p[parameter as usize] = v;
+            // The range, not the value: float formatting would cost the firmware 10 KiB
+            // of flash.
             Calibration::new(p[0], p[1], p[2], p[3])
                 .map(|_| ())
-                .map_err(|e| error(ErrorCode::Key, format_args!("{key}: {e}")))
+                .map_err(|e| {
+                    let range = match e {
+                        CalibrationError::Gain(_) => "finite, non-zero, below 128 per count",
+                        CalibrationError::Zero(_) => "within 0..=65535 counts",
+                        CalibrationError::Drift(_) => "within ±1000 counts per °C",
+                        CalibrationError::Reference(_) => "within ±1000 °C",
+                    };
+                    error(ErrorCode::Key, format_args!("{key} must be {range}"))
+                })
         }
     }
 }
