@@ -17,6 +17,7 @@
 //! | [`Request::Save`] | 0x12 | as Load | CRC-32 (`u32`), the slot written (1 A, 2 B, `u8`), the CPU's worst-case stall (ms, `u16`) |
 //! | [`Request::EnterService`] | 0x30 | — | — |
 //! | [`Request::LeaveService`] | 0x31 | — | — |
+//! | [`Request::LastCrash`] | 0x40 | — | 0 (none), or 1, the [`CrashKind`], the program counter (`u32`), the message (length, UTF-8) |
 //! | [`Request::ReadKey`] | 0x20 | key (`u16`) | value (4 bytes) |
 //! | [`Request::WriteKey`] | 0x21 | key (`u16`), value (4 bytes) | — |
 //!
@@ -42,6 +43,73 @@ pub const NAME_MAX: usize = 16;
 pub const DETAIL_MAX: usize = 48;
 /// Bytes of a message around its body: the code and the CRC-32.
 const FRAMING: usize = 1 + 4;
+
+/// The longest crash message a fingertip keeps, bytes.
+pub const MESSAGE_MAX: usize = 48;
+
+/// Why the firmware stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[repr(u8)]
+pub enum CrashKind {
+    /// A panic: the message says what and where.
+    Panic = 1,
+    /// A hard fault: the program counter says where.
+    HardFault = 2,
+}
+
+impl CrashKind {
+    /// From the raw value; `None` for one that names nothing.
+    pub const fn from_raw(raw: u8) -> Option<CrashKind> {
+        match raw {
+            1 => Some(CrashKind::Panic),
+            2 => Some(CrashKind::HardFault),
+            _ => None,
+        }
+    }
+
+    /// The name the tools print.
+    pub const fn name(self) -> &'static str {
+        match self {
+            CrashKind::Panic => "panic",
+            CrashKind::HardFault => "hard fault",
+        }
+    }
+}
+
+/// What the firmware knew when it stopped, kept across the reset.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CrashReport {
+    /// Why.
+    pub kind: CrashKind,
+    /// The program counter at a fault (0 for a panic).
+    pub pc: u32,
+    /// A panic's message and place, cut to [`MESSAGE_MAX`] bytes at a character.
+    pub message: heapless::String<MESSAGE_MAX>,
+}
+
+impl CrashReport {
+    /// A crash of `kind` at `pc`, no message yet (write it with `core::fmt::Write`).
+    pub const fn new(kind: CrashKind, pc: u32) -> CrashReport {
+        CrashReport {
+            kind,
+            pc,
+            message: heapless::String::new(),
+        }
+    }
+}
+
+impl core::fmt::Write for CrashReport {
+    /// Appends what fits; the rest is cut at a character.
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        for c in s.chars() {
+            if self.message.push(c).is_err() {
+                break;
+            }
+        }
+        Ok(())
+    }
+}
 
 /// A detector's name as the fingertip reports it: 0 to [`NAME_MAX`] bytes of UTF-8.
 pub type DetectorName = heapless::String<NAME_MAX>;
@@ -261,6 +329,8 @@ pub enum Request<'a> {
     EnterService,
     /// Leave the service state: the detector back in service, from a fresh state.
     LeaveService,
+    /// Why the firmware last stopped, if it could tell (a panic, a hard fault).
+    LastCrash,
     /// Read a key of the store.
     ReadKey(Key),
     /// Write a key of the store.
@@ -353,6 +423,8 @@ pub enum Response {
     },
     /// To [`Request::EnterService`] and [`Request::LeaveService`].
     Done,
+    /// To [`Request::LastCrash`]: the crash found at the last boot, if any.
+    Crash(Option<CrashReport>),
     /// The request failed.
     Error(ErrorCode, Detail),
 }
@@ -483,6 +555,7 @@ const WRITE_KEY: u8 = 0x21;
 const SAVE: u8 = 0x12;
 const ENTER_SERVICE: u8 = 0x30;
 const LEAVE_SERVICE: u8 = 0x31;
+const LAST_CRASH: u8 = 0x40;
 /// Bit 7 marks a response.
 const RESPONSE: u8 = 0x80;
 
@@ -497,6 +570,7 @@ impl<'a> Request<'a> {
             Request::Save { .. } => SAVE,
             Request::EnterService => ENTER_SERVICE,
             Request::LeaveService => LEAVE_SERVICE,
+            Request::LastCrash => LAST_CRASH,
         }
     }
 
@@ -507,7 +581,8 @@ impl<'a> Request<'a> {
             Request::Identify
             | Request::Activate
             | Request::EnterService
-            | Request::LeaveService => {}
+            | Request::LeaveService
+            | Request::LastCrash => {}
             Request::Load { name, image } | Request::Save { name, image } => {
                 if name.len() > NAME_MAX {
                     return Err(ServiceError::Malformed);
@@ -535,6 +610,7 @@ impl<'a> Request<'a> {
             ACTIVATE => Request::Activate,
             ENTER_SERVICE => Request::EnterService,
             LEAVE_SERVICE => Request::LeaveService,
+            LAST_CRASH => Request::LastCrash,
             LOAD | SAVE => {
                 let n = usize::from(b.u8()?);
                 if n > NAME_MAX {
@@ -601,6 +677,13 @@ impl Response {
                         w.put(&[*slot]);
                         w.put(&stall_ms.to_le_bytes());
                     }
+                    Response::Crash(None) => w.put(&[0]),
+                    Response::Crash(Some(c)) => {
+                        w.put(&[1, c.kind as u8]);
+                        w.put(&c.pc.to_le_bytes());
+                        w.put(&[c.message.len() as u8]);
+                        w.put(c.message.as_bytes());
+                    }
                     Response::Written | Response::Done | Response::Error(..) => {}
                 }
             }
@@ -652,6 +735,20 @@ impl Response {
                 stall_ms: b.u16()?,
             },
             ENTER_SERVICE | LEAVE_SERVICE => Response::Done,
+            LAST_CRASH => Response::Crash(match b.u8()? {
+                0 => None,
+                1 => {
+                    let kind = CrashKind::from_raw(b.u8()?).ok_or(ServiceError::Malformed)?;
+                    let pc = b.u32()?;
+                    let n = usize::from(b.u8()?);
+                    Some(CrashReport {
+                        kind,
+                        pc,
+                        message: b.text(n)?,
+                    })
+                }
+                _ => return Err(ServiceError::Malformed),
+            }),
             _ => return Err(ServiceError::Malformed),
         };
         b.end()?;
@@ -698,6 +795,7 @@ mod tests {
         round_trip(Request::Identify);
         round_trip(Request::Activate);
         round_trip(Request::EnterService);
+        round_trip(Request::LastCrash);
         round_trip(Request::LeaveService);
         round_trip(Request::Save {
             name: "fitted",
@@ -750,6 +848,17 @@ mod tests {
                 },
             ),
             (ENTER_SERVICE, Response::Done),
+            (LAST_CRASH, Response::Crash(None)),
+            (LAST_CRASH, {
+                let mut c = CrashReport::new(CrashKind::Panic, 0);
+                core::fmt::Write::write_str(&mut c, &"é".repeat(40)).unwrap();
+                assert_eq!(c.message.len(), MESSAGE_MAX);
+                Response::Crash(Some(c))
+            }),
+            (
+                LAST_CRASH,
+                Response::Crash(Some(CrashReport::new(CrashKind::HardFault, 0x0800_1234))),
+            ),
             (LEAVE_SERVICE, Response::Done),
             (
                 LOAD,

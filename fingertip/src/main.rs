@@ -1282,6 +1282,16 @@ fn info_cmd(node: u8, iface: &str) -> Result<()> {
             if let Some(s) = i.staged_crc {
                 println!("staged: CRC-32 {s:#010x}, waiting for the next phase entry");
             }
+            match ask(&mut client, node, &Request::LastCrash)? {
+                Response::Crash(Some(c)) => println!(
+                    "the last run stopped: {} at {:#010x}: {}",
+                    c.kind.name(),
+                    c.pc,
+                    c.message
+                ),
+                Response::Crash(None) => println!("no crash kept from the last run"),
+                other => bail!("node {}: unexpected answer {other:?}", node.get()),
+            }
             Ok(())
         }
         Response::Error(code, text) => Err(refused(node, code, &text)),

@@ -7,6 +7,7 @@ pub mod calib;
 pub mod can_timing;
 pub mod channel_set;
 pub mod checksum;
+pub mod crash;
 pub mod engine;
 pub mod flash_map;
 pub mod flash_sim;

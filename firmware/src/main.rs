@@ -31,9 +31,10 @@ use core::num::{NonZeroU8, NonZeroU16};
 use core::cell::UnsafeCell;
 use cortex_m::peripheral::DWT;
 use cortex_m::peripheral::SCB;
-use cortex_m_rt::{entry, exception};
+use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, warn};
 
+use defmt_rtt as _;
 use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_executor::{Executor, InterruptExecutor, Spawner};
 use embassy_futures::block_on;
@@ -55,13 +56,14 @@ use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
-use {defmt_rtt as _, panic_probe as _};
 
 use core::cell::{Cell, RefCell};
 use detector_core::Detector;
 use detector_core::Tick;
+use fingertip_can::service::{CrashKind, CrashReport};
 use fingertip_can::{BusFormat, CanFrame, NodeId, Receiver};
 use firmware::boot::{self, ApproachTick};
+use firmware::crash::CrashRecord;
 use firmware::engine::{BoardInfo, Service, TickRunner};
 use firmware::load::Loader;
 use firmware::node_id::{self, NodeIdError};
@@ -268,6 +270,51 @@ struct Board {
     node: NodeId,
 }
 
+/// The crash record, in RAM a reset leaves alone (`.uninit`): written by the panic and
+/// hard-fault handlers, read and cleared at boot ([`firmware::crash`]).
+#[unsafe(link_section = ".uninit.CRASH")]
+static mut CRASH: core::mem::MaybeUninit<CrashRecord> = core::mem::MaybeUninit::uninit();
+
+/// Keeps `report` in the crash record and resets. Interrupts off: nothing else runs.
+fn crash(report: &CrashReport) -> ! {
+    cortex_m::interrupt::disable();
+    // SAFETY: interrupts are off and this never returns: the record's one user now.
+    unsafe { (*core::ptr::addr_of_mut!(CRASH)).write(CrashRecord::empty()) }.write(report);
+    SCB::sys_reset()
+}
+
+/// The crash kept by the last run, if any, and the record cleared.
+fn last_crash() -> Option<CrashReport> {
+    // SAFETY: read once at boot, before any task or handler that writes it runs. After a
+    // power-on the RAM holds whatever pattern it came up with: every pattern is a valid
+    // array of words, and the magic and CRC-32 refuse all but a record.
+    let record = unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashRecord>() };
+    let crash = record.read();
+    record.clear();
+    crash
+}
+
+/// A panic: its place and message kept for the next boot (the service channel's
+/// LastCrash), logged, and a reset.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    use core::fmt::Write as _;
+    let mut report = CrashReport::new(CrashKind::Panic, 0);
+    if let Some(at) = info.location() {
+        let file = at.file().rsplit('/').next().unwrap_or("");
+        let _ = write!(report, "{file}:{}: ", at.line());
+    }
+    let _ = write!(report, "{}", info.message());
+    error!("panic: {=str}", report.message.as_str());
+    crash(&report)
+}
+
+/// A hard fault: where it happened kept for the next boot, and a reset.
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    crash(&CrashReport::new(CrashKind::HardFault, frame.pc()))
+}
+
 /// The clock security system saw the crystal stop: the core fell back to the internal
 /// oscillator and the PLL stopped, so no timing holds. Start over: the boot's probe finds
 /// the crystal dead and runs from the internal oscillator (`FaultClockFallback`).
@@ -348,8 +395,17 @@ fn main() -> ! {
 #[inline(never)]
 fn setup() -> Board {
     // The reset reason, read before the HAL touches the RCC, and cleared so the next
-    // boot reports its own.
+    // boot reports its own; and why the last run stopped, when it could tell.
     let reset = reset::reset_reason(regs::take_reset_flags());
+    let crashed = last_crash();
+    if let Some(c) = &crashed {
+        error!(
+            "the last run stopped: {=str} at {=u32:#010x}: {=str}",
+            c.kind.name(),
+            c.pc,
+            c.message.as_str()
+        );
+    }
     // A dead crystal must not hang the boot before the watchdog runs: probe it with a
     // timeout first, and fall back to the internal oscillator.
     let crystal = regs::hse_starts();
@@ -573,7 +629,8 @@ fn setup() -> Board {
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
-        requests: Requests::new(Loader::new(SPARE.take(), rate_hz as f32), &MAILBOX, nvm),
+        requests: Requests::new(Loader::new(SPARE.take(), rate_hz as f32), &MAILBOX, nvm)
+            .with_last_crash(crashed),
         node,
     }
 }

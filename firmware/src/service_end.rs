@@ -26,7 +26,7 @@ use detector_core::DetectorTick;
 use embassy_sync::blocking_mutex::Mutex;
 use embedded_storage_async::nor_flash::NorFlash;
 use fingertip_can::service::{
-    DetectorName, ErrorCode, Identity, Key, Mode, Request, Response, detail,
+    CrashReport, DetectorName, ErrorCode, Identity, Key, Mode, Request, Response, detail,
 };
 use fingertip_can::transfer::{MAX_MESSAGE, Payload, Reassembler, Received, SINGLE_MAX, Sender};
 
@@ -142,6 +142,7 @@ pub struct Requests<'m, 'd, F> {
     loader: Loader<'d>,
     mailbox: &'m Mailbox<'d>,
     nvm: Nvm<F>,
+    last_crash: Option<CrashReport>,
 }
 
 /// A failed request's response.
@@ -190,7 +191,14 @@ impl<'m, 'd, F: NorFlash> Requests<'m, 'd, F> {
             loader,
             mailbox,
             nvm,
+            last_crash: None,
         }
+    }
+
+    /// Answers LastCrash with `crash`, found at boot ([`crate::crash`]).
+    pub fn with_last_crash(mut self, crash: Option<CrashReport>) -> Requests<'m, 'd, F> {
+        self.last_crash = crash;
+        self
     }
 
     /// The flash.
@@ -310,6 +318,7 @@ impl<'m, 'd, F: NorFlash> Requests<'m, 'd, F> {
                 self.mailbox.with(|i| i.service = on);
                 Response::Done
             }
+            Request::LastCrash => Response::Crash(self.last_crash.clone()),
             Request::ReadKey(k) => match self.nvm.read_key(k.raw()).await {
                 Ok(Some(v)) => Response::Value(v),
                 Ok(None) => {
@@ -419,7 +428,9 @@ mod tests {
             ErrorCode::Channel,
             detail(format_args!("{}", "x".repeat(DETAIL_MAX))),
         );
-        for r in [identity, error] {
+        let mut crash = CrashReport::new(fingertip_can::service::CrashKind::Panic, u32::MAX);
+        core::fmt::Write::write_str(&mut crash, &"m".repeat(100)).unwrap();
+        for r in [identity, error, Response::Crash(Some(crash))] {
             let frame = respond(0x10, &r, 0).expect("fits a single frame");
             assert!(frame.data().len() <= 64);
         }
