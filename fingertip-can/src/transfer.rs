@@ -537,15 +537,21 @@ mod tests {
         }
     }
 
+    /// A transfer of `m` past its first flow control (no block limit).
+    fn started(m: &[u8]) -> (Reassembler<MAX_MESSAGE>, Sender<'_>) {
+        let mut rx = Reassembler::<MAX_MESSAGE>::new(0, 0);
+        let (mut tx, first) = Sender::new(m, 0).unwrap();
+        let Received::Flow(f) = rx.on_frame(first.data(), 0) else {
+            panic!("a first frame is answered with a flow control")
+        };
+        tx.on_flow(f.data(), 0).unwrap();
+        (rx, tx)
+    }
+
     #[test]
     fn a_lost_or_repeated_frame_breaks_the_transfer_and_hands_on_nothing() {
         let m: Vec<u8> = (0..1000).map(|i| i as u8).collect();
-        let mut rx = Reassembler::<MAX_MESSAGE>::new(0, 0);
-        let (mut tx, first) = Sender::new(&m, 0).unwrap();
-        let Received::Flow(f) = rx.on_frame(first.data(), 0) else {
-            panic!()
-        };
-        tx.on_flow(f.data(), 0).unwrap();
+        let (mut rx, mut tx) = started(&m);
         let a = tx.poll(1).unwrap().unwrap();
         let _lost = tx.poll(2).unwrap().unwrap();
         let c = tx.poll(3).unwrap().unwrap();
@@ -560,12 +566,7 @@ mod tests {
             assert!(matches!(rx.on_frame(f.data(), 5), Received::Failed(..)));
         }
         // Repeated: the same frame twice.
-        let mut rx = Reassembler::<MAX_MESSAGE>::new(0, 0);
-        let (mut tx, first) = Sender::new(&m, 0).unwrap();
-        let Received::Flow(f) = rx.on_frame(first.data(), 0) else {
-            panic!()
-        };
-        tx.on_flow(f.data(), 0).unwrap();
+        let (mut rx, mut tx) = started(&m);
         let a = tx.poll(1).unwrap().unwrap();
         assert_eq!(rx.on_frame(a.data(), 1), Received::Pending);
         assert!(matches!(
