@@ -7,6 +7,9 @@
 //!   at boot, and its tick with the tables written in as constants (`detector_tick.rs`,
 //!   the unit struct `ApproachTick`), which the firmware runs; the configuration is then
 //!   checked against the channels the board can feed and the sample timer's clock;
+//! - `build_hash.rs`: the first 32 bits of the commit the firmware is built from
+//!   (`git rev-parse HEAD` in the workspace, or `FINGERTIP_BUILD_HASH`; 0 when neither
+//!   tells), reported in the status heartbeat;
 //! - `build_consts.rs`: the detector image's CRC-32 (reported in the status heartbeat),
 //!   its source path and the sample timer's period for its rate (the CAN node id is found
 //!   at boot, not built in);
@@ -84,6 +87,15 @@ fn main() -> Result<()> {
     writeln!(consts, "pub const CONFIG_SOURCE: &str = {config_rel:?};")?;
     writeln!(
         consts,
+        "/// The embedded detector's name: the configuration file's stem, at most 16 bytes."
+    )?;
+    writeln!(
+        consts,
+        "pub const CONFIG_NAME: &str = {:?};",
+        config_name(&config_rel)
+    )?;
+    writeln!(
+        consts,
         "/// Sample-timer clocks per detector tick, for the configuration's rate."
     )?;
     writeln!(consts, "pub const TRIGGER_CLOCKS: u32 = {};", period.clocks)?;
@@ -94,6 +106,13 @@ fn main() -> Result<()> {
         period.actual_mhz
     )?;
     fs::write(out.join("build_consts.rs"), consts)?;
+    fs::write(
+        out.join("build_hash.rs"),
+        format!(
+            "/// The first 32 bits of the commit the firmware was built from (0 unknown).\npub const BUILD_HASH: u32 = {:#010x};\n",
+            build_hash(&root)
+        ),
+    )?;
 
     if env::var("CARGO_CFG_TARGET_OS")? == "none" {
         // cortex-m-rt's link.x includes `memory.x`; the workspace root holds the STM32's.
@@ -108,6 +127,48 @@ fn main() -> Result<()> {
         println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
     }
     Ok(())
+}
+
+/// The configuration file's stem, cut to the 16 bytes a detector name has on the bus.
+fn config_name(path: &str) -> String {
+    let stem = std::path::Path::new(path)
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut name = String::new();
+    for c in stem.chars() {
+        if name.len() + c.len_utf8() > 16 {
+            break;
+        }
+        name.push(c);
+    }
+    name
+}
+
+/// The first 32 bits of the commit being built: `FINGERTIP_BUILD_HASH` (hex), else git's
+/// HEAD in the workspace, else 0. Rebuilds when HEAD moves.
+fn build_hash(root: &std::path::Path) -> u32 {
+    println!("cargo:rerun-if-env-changed=FINGERTIP_BUILD_HASH");
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .current_dir(root)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    if let Some(dir) = git(&["rev-parse", "--absolute-git-dir"]) {
+        println!("cargo:rerun-if-changed={dir}/HEAD");
+        println!("cargo:rerun-if-changed={dir}/logs/HEAD");
+    }
+    let hex = env::var("FINGERTIP_BUILD_HASH")
+        .ok()
+        .or_else(|| git(&["rev-parse", "HEAD"]))
+        .unwrap_or_default();
+    hex.get(..8)
+        .and_then(|h| u32::from_str_radix(h, 16).ok())
+        .unwrap_or(0)
 }
 
 /// Every configured channel must be one the board feeds; a channel nobody writes would

@@ -1,16 +1,17 @@
 #!/usr/bin/env bash
 # Builds the board firmware for the STM32 in release (warnings are errors), runs clippy on
-# it (CAN FD, and the classic-CAN build), and fails when it outgrows its budget: at most 64 KiB of flash and 16 KiB of static
-# RAM. Prints the figures, and an estimate of the boot stack against the RAM left over.
+# it (CAN FD, and the classic-CAN build), and fails when it outgrows its budget: the
+# application's 104 KiB of flash (memory.x: the detector slots and the store take the rest
+# of the first 128 KiB) and 40 KiB of static RAM (of the STM32G491CC's 112 KiB). Prints the figures, and an estimate of the boot stack against the RAM left over.
 #
 # Needs: the thumbv7em-none-eabihf target, llvm-tools (`rustup component add llvm-tools`)
 # and flip-link (`cargo install flip-link --locked`). Run from anywhere.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-FLASH_BUDGET=$((64 * 1024))
-RAM_BUDGET=$((16 * 1024))
-RAM_TOTAL=$((32 * 1024)) # STM32G431CB, memory.x
+FLASH_BUDGET=$((104 * 1024))
+RAM_BUDGET=$((40 * 1024))
+RAM_TOTAL=$((112 * 1024)) # STM32G491CC, memory.x
 
 command -v flip-link >/dev/null || { echo "check-size: flip-link missing: cargo install flip-link --locked" >&2; exit 2; }
 sysroot=$(rustc --print sysroot)

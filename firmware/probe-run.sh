@@ -9,7 +9,8 @@ feature=$(grep -E '^embassy-stm32 *=' "$here/Cargo.toml" | grep -oE '"stm32[a-z0
 case "$feature" in
     # probe-rs names the package too; the flash algorithm and memory map are the same
     # for every package of a part.
-    stm32g431cb) chip=STM32G431CBUx ;; # UFQFPN48, the fingertip board
+    stm32g491cc) chip=STM32G491CCUx ;; # UFQFPN48, the fingertip board
+    stm32g431cb) chip=STM32G431CBUx ;; # UFQFPN48, the G431 the board began with
     stm32g474re) chip=STM32G474RETx ;; # LQFP64, NUCLEO-G474RE
     "") echo "probe-run.sh: no stm32 chip feature on the embassy-stm32 line of $here/Cargo.toml" >&2; exit 2 ;;
     *) chip=$(echo "$feature" | tr '[:lower:]' '[:upper:]') ;; # probe-rs accepts a unique prefix

@@ -43,5 +43,5 @@ step "tests (host; the emulated Cortex-M4; cantools)"
 export FINGERTIP_REQUIRE_PYTHON=1 FINGERTIP_REQUIRE_QEMU=1
 cargo test
 
-step "firmware for the STM32G431CB: release build without warnings, clippy, size budget"
+step "firmware for the STM32G491CC: release build without warnings, clippy, size budget"
 bash firmware/check-size.sh

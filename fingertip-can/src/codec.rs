@@ -28,7 +28,7 @@ pub const ACC_DES_RAW_MAX: i16 = 4095;
 pub const POS_ERR_RAW_MAX: i16 = 32767;
 
 /// Pages of the status message, `0..STATUS_PAGES`.
-pub const STATUS_PAGES: u8 = 11;
+pub const STATUS_PAGES: u8 = 17;
 
 /// The status health page's phase value meaning "no phase yet".
 pub const NO_PHASE: u8 = 15;
@@ -989,7 +989,7 @@ impl NodeIdSource {
     }
 }
 
-/// Fault flags of the status heartbeat, one bit each (16 bits, 9 used).
+/// Fault flags of the status heartbeat, one bit each (16 bits, 10 used).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct FaultFlags(pub u16);
@@ -1009,16 +1009,22 @@ impl FaultFlags {
     /// A frame could not be queued or was flushed since the last heartbeat.
     pub const TX_DROPPED: FaultFlags = FaultFlags(1 << 5);
     /// The detector image was rejected (or the tick does not match it): the detector is out
-    /// of service and the fingertip sends only its status heartbeat.
+    /// of service and the fingertip sends only its status heartbeat; or a detector saved
+    /// in flash was chosen but none is whole, and the built-in one runs in its place
+    /// (status page 11 says which).
     pub const CONFIG_FALLBACK: FaultFlags = FaultFlags(1 << 6);
     /// A sensor channel is flagged faulty.
     pub const SENSOR_FAULT: FaultFlags = FaultFlags(1 << 7);
     /// The crystal did not start: the fingertip runs from its internal oscillator, whose
     /// tolerance is outside the CAN FD data phase's.
     pub const CLOCK_FALLBACK: FaultFlags = FaultFlags(1 << 8);
+    /// The fingertip is in its service state (its flash being written, which stalls the
+    /// CPU): the detector is out of service, and the fingertip sends only its status
+    /// heartbeat.
+    pub const SERVICE: FaultFlags = FaultFlags(1 << 9);
 
     /// The flags' names as the DBC's signals write them, by bit.
-    pub const NAMES: [&'static str; 9] = [
+    pub const NAMES: [&'static str; 10] = [
         "FaultContextStale",
         "FaultTipStateStale",
         "FaultPhaseStale",
@@ -1028,6 +1034,7 @@ impl FaultFlags {
         "FaultConfigFallback",
         "FaultSensor",
         "FaultClockFallback",
+        "FaultService",
     ];
 
     /// Whether every flag of `other` is set.
@@ -1069,6 +1076,9 @@ impl core::ops::BitOr for FaultFlags {
 /// | 8 rejects | `RejSequence`, `RejOutOfRange` |
 /// | 9 rejects | `RejUnknownId`, `RejPhaseNotConfigured` |
 /// | 10 configuration | `ConfigChecksum` |
+/// | 11 firmware | `FirmwareMajor` 32..40, `FirmwareMinor` 40..48, `FirmwarePatch` 48..56, `DetectorMode` 56..60 (0 built-in, 1 loaded, 2 fallback) |
+/// | 12 build | `BuildHash`: the first 32 bits of the firmware's commit |
+/// | 13..=16 detector name | `DetectorName0`..`DetectorName3`: bytes 4k..4k+4 of the active detector's name (UTF-8, zero-padded) |
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum StatusPage {
@@ -1155,6 +1165,25 @@ pub enum StatusPage {
         /// Checksum of the active configuration.
         checksum: u32,
     },
+    /// Page 11.
+    Firmware {
+        /// The firmware's version: major, minor, patch.
+        version: [u8; 3],
+        /// What runs the detector.
+        mode: crate::service::Mode,
+    },
+    /// Page 12.
+    Build {
+        /// The first 32 bits of the commit the firmware was built from (0 unknown).
+        hash: u32,
+    },
+    /// Pages 13..=16: four bytes of the active detector's name.
+    DetectorName {
+        /// Which four: bytes `4 × part ..`, `0..=3`.
+        part: u8,
+        /// The bytes, zero-padded past the name's end.
+        bytes: [u8; 4],
+    },
 }
 
 impl StatusPage {
@@ -1172,6 +1201,9 @@ impl StatusPage {
             StatusPage::RejectsContent { .. } => 8,
             StatusPage::RejectsRoute { .. } => 9,
             StatusPage::Config { .. } => 10,
+            StatusPage::Firmware { .. } => 11,
+            StatusPage::Build { .. } => 12,
+            StatusPage::DetectorName { part, .. } => 13 + (*part & 3),
         }
     }
 
@@ -1292,6 +1324,14 @@ impl StatusPage {
                 p.put(57, 3, node_source as u32);
             }
             StatusPage::Config { checksum } => p.put(32, 32, checksum),
+            StatusPage::Firmware { version, mode } => {
+                p.put(32, 8, u32::from(version[0]));
+                p.put(40, 8, u32::from(version[1]));
+                p.put(48, 8, u32::from(version[2]));
+                p.put(56, 4, mode as u32);
+            }
+            StatusPage::Build { hash } => p.put(32, 32, hash),
+            StatusPage::DetectorName { bytes, .. } => p.put(32, 32, u32::from_le_bytes(bytes)),
             // Counter pages were written above.
             _ => {}
         }
@@ -1348,6 +1388,26 @@ impl StatusPage {
             }
             10 => StatusPage::Config {
                 checksum: get(d, 32, 32),
+            },
+            11 => {
+                let raw_mode = get(d, 56, 4);
+                StatusPage::Firmware {
+                    version: [
+                        get(d, 32, 8) as u8,
+                        get(d, 40, 8) as u8,
+                        get(d, 48, 8) as u8,
+                    ],
+                    mode: *crate::service::Mode::ALL
+                        .get(raw_mode as usize)
+                        .ok_or(out("DetectorMode", raw_mode))?,
+                }
+            }
+            12 => StatusPage::Build {
+                hash: get(d, 32, 32),
+            },
+            13..=16 => StatusPage::DetectorName {
+                part: page as u8 - 13,
+                bytes: get(d, 32, 32).to_le_bytes(),
             },
             p => return Err(out("Page", p)),
         })
@@ -1622,6 +1682,24 @@ mod tests {
                     checksum: 0xDEAD_BEEF,
                 },
             }),
+            Message::Status(StatusMsg {
+                counter: Counter(7),
+                page: StatusPage::Firmware {
+                    version: [1, 255, 0],
+                    mode: crate::service::Mode::Fallback,
+                },
+            }),
+            Message::Status(StatusMsg {
+                counter: Counter(8),
+                page: StatusPage::Build { hash: 0x0123_4567 },
+            }),
+            Message::Status(StatusMsg {
+                counter: Counter(9),
+                page: StatusPage::DetectorName {
+                    part: 3,
+                    bytes: *b"ach\0",
+                },
+            }),
         ];
         for m in per_node {
             for n in [0, 5, 14] {
@@ -1790,12 +1868,24 @@ mod tests {
                 ..
             }
         ));
-        let e = refused(MessageKind::Status, &|d| put(d, 24, 8, 11));
+        let e = refused(MessageKind::Status, &|d| put(d, 24, 8, 17));
         assert!(matches!(
             e,
             DecodeError::OutOfRange {
                 signal: "Page",
-                value: 11,
+                value: 17,
+                ..
+            }
+        ));
+        let e = refused(MessageKind::Status, &|d| {
+            put(d, 24, 8, 11);
+            put(d, 56, 4, 3);
+        });
+        assert!(matches!(
+            e,
+            DecodeError::OutOfRange {
+                signal: "DetectorMode",
+                value: 3,
                 ..
             }
         ));
@@ -1832,7 +1922,7 @@ mod tests {
             page: StatusPage::Health {
                 reset: ResetReason::Unknown,
                 phase: None,
-                faults: FaultFlags(1 << 9),
+                faults: FaultFlags(1 << 10),
                 phase_seq: 0,
             },
         };

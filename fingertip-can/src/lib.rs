@@ -29,8 +29,8 @@
 //!
 //! Every frame carries a CRC-16 and an 8-bit counter ([`e2e`], AUTOSAR E2E profile 5
 //! layout). Identifiers 0x001..=0x07F stay free for traffic that must beat everything
-//! (an emergency stop); [`RESERVED_REQUEST_CLASS`] and [`RESERVED_RESPONSE_CLASS`] are
-//! kept for a per-node request/response channel.
+//! (an emergency stop); [`SERVICE_REQUEST_CLASS`] and [`SERVICE_RESPONSE_CLASS`] carry
+//! the per-node service channel ([`service`]).
 //!
 //! # Modules
 //! - [`e2e`]: the CRC-16 and the rolling counter.
@@ -38,6 +38,11 @@
 //! - [`rx`] ([`Receiver`]): validates the controller's frames, counts rejections and lost
 //!   frames, keeps the context and tells when it has gone stale.
 //! - [`tx`] ([`Transmitter`]): turns each tick's detector output into the frames to send.
+//! - [`transfer`]: the segmented transfer (ISO 15765-2 framing on CAN FD, flow control) on
+//!   a node's request and response identifiers, [`SERVICE_REQUEST_CLASS`] and
+//!   [`SERVICE_RESPONSE_CLASS`].
+//! - [`service`]: the requests and responses it carries (load a detector, read and write
+//!   the store's keys, identify), each with a CRC-32.
 
 #![cfg_attr(not(test), no_std)]
 #![forbid(unsafe_code)]
@@ -45,6 +50,8 @@
 mod codec;
 pub mod e2e;
 pub mod rx;
+pub mod service;
+pub mod transfer;
 pub mod tx;
 
 pub use codec::{
@@ -218,14 +225,23 @@ impl BusFormat {
     }
 }
 
-/// The class of the reserved request identifiers (controller → fingertip,
-/// `0x680 | node`): kept for a segmented request/response channel (loading a detector
-/// image, calibration keys, the flight recorder), not used by this version. Low
-/// priority on purpose, and outside CANopen's predefined objects.
-pub const RESERVED_REQUEST_CLASS: u16 = 0x68;
-/// The class of the reserved response identifiers (fingertip → controller,
-/// `0x690 | node`); see [`RESERVED_REQUEST_CLASS`].
-pub const RESERVED_RESPONSE_CLASS: u16 = 0x69;
+/// The class of the service request identifiers (controller → fingertip, `0x680 | node`):
+/// the [`service`] channel's requests, in [`transfer`] frames. Low priority on purpose, and
+/// outside CANopen's predefined objects.
+pub const SERVICE_REQUEST_CLASS: u16 = 0x68;
+/// The class of the service response identifiers (fingertip → controller,
+/// `0x690 | node`); see [`SERVICE_REQUEST_CLASS`].
+pub const SERVICE_RESPONSE_CLASS: u16 = 0x69;
+
+/// The identifier of `node`'s service requests, `0x680 + node`.
+pub const fn service_request_id(node: NodeId) -> StandardId {
+    standard(SERVICE_REQUEST_CLASS << 4 | node.0 as u16)
+}
+
+/// The identifier of `node`'s service responses, `0x690 + node`.
+pub const fn service_response_id(node: NodeId) -> StandardId {
+    standard(SERVICE_RESPONSE_CLASS << 4 | node.0 as u16)
+}
 
 /// The messages of the protocol, in priority order (highest first).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -542,12 +558,20 @@ mod tests {
             assert!((0x101..=0x17F).contains(&id), "{id:#05X}");
         }
         for node in NodeId::all() {
-            for class in [RESERVED_REQUEST_CLASS, RESERVED_RESPONSE_CLASS] {
+            for class in [SERVICE_REQUEST_CLASS, SERVICE_RESPONSE_CLASS] {
                 let id = class << 4 | u16::from(node.get());
                 assert!(!ours.contains(&id));
                 // Not CANopen's SDOs (0x581..=0x67F) nor heartbeats (0x701..=0x77F).
                 assert!((0x680..=0x6DF).contains(&id), "{id:#05X}");
             }
+            assert_eq!(
+                service_request_id(node).as_raw(),
+                0x680 + u16::from(node.get())
+            );
+            assert_eq!(
+                service_response_id(node).as_raw(),
+                0x690 + u16::from(node.get())
+            );
         }
     }
 

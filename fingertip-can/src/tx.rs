@@ -106,6 +106,14 @@ pub struct Status {
     pub config_checksum: u32,
     /// The receiver's counters.
     pub rx: RxCounts,
+    /// The firmware's version: major, minor, patch.
+    pub firmware: [u8; 3],
+    /// The first 32 bits of the firmware's commit (0 unknown).
+    pub build: u32,
+    /// What runs the detector.
+    pub mode: crate::service::Mode,
+    /// The active detector's name, UTF-8, zero-padded.
+    pub detector_name: [u8; crate::service::NAME_MAX],
 }
 
 fn sat16(v: u32) -> u16 {
@@ -172,6 +180,20 @@ impl Status {
                 unknown_id: rej(RejectReason::UnknownId),
                 phase_not_configured: rej(RejectReason::PhaseNotConfigured),
             },
+            11 => StatusPage::Firmware {
+                version: self.firmware,
+                mode: self.mode,
+            },
+            12 => StatusPage::Build { hash: self.build },
+            13..=16 => {
+                let part = page - 13;
+                let mut bytes = [0u8; 4];
+                let at = usize::from(part) * 4;
+                if let Some(b) = self.detector_name.get(at..at + 4) {
+                    bytes.copy_from_slice(b);
+                }
+                StatusPage::DetectorName { part, bytes }
+            }
             10 => StatusPage::Config {
                 checksum: self.config_checksum,
             },
@@ -452,7 +474,7 @@ mod tests {
         assert!(stream_ticks.windows(2).all(|w| w[1] - w[0] == 5));
         let want: std::vec::Vec<(u32, u8)> = (0..11u32)
             .flat_map(|k| {
-                let p = (k % 10) as u8 + 1;
+                let p = (k % u32::from(STATUS_PAGES - 1)) as u8 + 1;
                 [(1000 + 20 * k, 0), (1000 + 20 * k, p)]
             })
             .collect();

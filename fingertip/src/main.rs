@@ -129,6 +129,52 @@ enum Command {
         #[arg(long)]
         candump: Option<PathBuf>,
     },
+    /// Load a detector into a running fingertip over its service channel (SocketCAN, CAN
+    /// FD): builds the configuration's image, sends it, and reports the CRC-32 the
+    /// fingertip checked. It takes over at the next phase entry, or at once with
+    /// --activate.
+    Load {
+        /// Detector configuration (TOML).
+        config: PathBuf,
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+        /// Put it in service at the fingertip's next tick instead of the next phase entry.
+        #[arg(long)]
+        activate: bool,
+        /// Also save it to a flash slot, so the fingertip boots with it: the fingertip
+        /// enters its service state for the write (its detector out of service for up to
+        /// 0.2 s), then leaves it.
+        #[arg(long)]
+        save: bool,
+    },
+    /// Read or write a fingertip's calibration keys and node id (its flash store):
+    /// `force_x.gain`, `force_x.zero`, `force_x.drift`, `force_x.t_ref` (and the same for
+    /// force_y, skin_accel, stress_rate), `node_id`. `KEY` reads, `KEY=VALUE` writes
+    /// (in the fingertip's service state, entered and left around the writes).
+    Calibrate {
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+        /// Keys to read (`KEY`) or write (`KEY=VALUE`); every key when none is given.
+        keys: Vec<String>,
+    },
+    /// What a fingertip runs: firmware version and build, the detector in service (its
+    /// CRC-32 and name) and any waiting for its phase boundary.
+    Info {
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+    },
     /// Worst-case CAN bus load (CAN FD, or classic CAN) and event-frame latency for N
     /// fingertips, both directions, bit stuffing in both phases.
     Busload {
@@ -362,6 +408,15 @@ fn run(cli: Cli) -> Result<()> {
             seconds,
             candump.as_deref(),
         ),
+        Command::Load {
+            config,
+            node,
+            iface,
+            activate,
+            save,
+        } => load_cmd(&config, node, &iface, activate, save),
+        Command::Calibrate { node, iface, keys } => calibrate_cmd(node, &iface, &keys),
+        Command::Info { node, iface } => info_cmd(node, &iface),
         Command::Busload {
             fingertips,
             decimation,
@@ -967,6 +1022,281 @@ fn stream_series(
     let t0 = t0.unwrap_or(0.0);
     let t: Vec<f64> = t.iter().map(|x| x - t0).collect();
     (t, series, decisions)
+}
+
+/// The detector's name as a fingertip keeps it: the configuration file's stem, cut to
+/// the protocol's 16 bytes at a character.
+fn detector_name(config: &Path) -> String {
+    let stem = config
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let mut name = String::new();
+    for c in stem.chars() {
+        if name.len() + c.len_utf8() > fingertip_can::service::NAME_MAX {
+            break;
+        }
+        name.push(c);
+    }
+    name
+}
+
+/// A service-channel client for `node` on `iface`.
+#[cfg(target_os = "linux")]
+fn service_client(
+    node: NodeId,
+    iface: &str,
+) -> Result<fingertip::can_tools::service::Client<fingertip::can_tools::service::SocketLink>> {
+    use fingertip::can_tools::service::{Client, SocketLink};
+    let link = SocketLink::open(iface, node).with_context(|| format!("CAN interface {iface}"))?;
+    Ok(Client::new(link))
+}
+
+#[cfg(not(target_os = "linux"))]
+fn service_client(
+    _node: NodeId,
+    iface: &str,
+) -> Result<fingertip::can_tools::service::Client<NoLink>> {
+    bail!("CAN interface {iface}: SocketCAN is Linux only")
+}
+
+/// Stands in for a link where SocketCAN does not exist.
+#[cfg(not(target_os = "linux"))]
+struct NoLink;
+
+#[cfg(not(target_os = "linux"))]
+impl fingertip::can_tools::service::Link for NoLink {
+    fn send(&mut self, _: &[u8]) -> std::io::Result<()> {
+        Err(std::io::Error::other("no SocketCAN"))
+    }
+    fn recv(&mut self, _: u64) -> std::io::Result<Option<Vec<u8>>> {
+        Err(std::io::Error::other("no SocketCAN"))
+    }
+    fn now_us(&mut self) -> u64 {
+        0
+    }
+}
+
+/// An error response as one line.
+fn refused(node: NodeId, code: fingertip_can::service::ErrorCode, text: &str) -> anyhow::Error {
+    anyhow!("node {}: {}: {text}", node.get(), code.name())
+}
+
+/// Sends `request`; an error response becomes an error naming the node.
+fn ask<L: fingertip::can_tools::service::Link>(
+    client: &mut fingertip::can_tools::service::Client<L>,
+    node: NodeId,
+    request: &fingertip_can::service::Request<'_>,
+) -> Result<fingertip_can::service::Response> {
+    match client.request(request)? {
+        fingertip_can::service::Response::Error(code, text) => Err(refused(node, code, &text)),
+        r => Ok(r),
+    }
+}
+
+/// Runs `writes` in the fingertip's service state, and leaves it whatever they did.
+fn in_service_state<L: fingertip::can_tools::service::Link, T>(
+    client: &mut fingertip::can_tools::service::Client<L>,
+    node: NodeId,
+    writes: impl FnOnce(&mut fingertip::can_tools::service::Client<L>) -> Result<T>,
+) -> Result<T> {
+    use fingertip_can::service::Request;
+    ask(client, node, &Request::EnterService)?;
+    // The detector task takes the engine out of service at its next tick (200 µs).
+    std::thread::sleep(std::time::Duration::from_millis(2));
+    let result = writes(client);
+    let left = ask(client, node, &Request::LeaveService);
+    let value = result?;
+    left?;
+    Ok(value)
+}
+
+fn load_cmd(config: &Path, node: u8, iface: &str, activate: bool, save: bool) -> Result<()> {
+    use fingertip_can::service::{Request, Response, crc32};
+    let node = node_id(node)?;
+    let parsed = detector_build::load(config)?;
+    let image = detector_build::compile(&parsed)
+        .with_context(|| config.display().to_string())?
+        .image();
+    let name = detector_name(config);
+    let crc = crc32(&image);
+    let mut client = service_client(node, iface)?;
+    let checked = |c: u32| {
+        if c == crc {
+            Ok(())
+        } else {
+            Err(anyhow!(
+                "node {}: the fingertip checked CRC-32 {c:#010x}, the image's is {crc:#010x}",
+                node.get()
+            ))
+        }
+    };
+    let load = Request::Load {
+        name: &name,
+        image: &image,
+    };
+    match ask(&mut client, node, &load)? {
+        Response::Staged(c) => checked(c)?,
+        other => bail!("node {}: unexpected answer {other:?}", node.get()),
+    }
+    println!(
+        "node {}: `{name}` loaded ({} bytes, CRC-32 {crc:#010x}), checked and staged",
+        node.get(),
+        image.len()
+    );
+    if save {
+        let saved = in_service_state(&mut client, node, |client| {
+            ask(
+                client,
+                node,
+                &Request::Save {
+                    name: &name,
+                    image: &image,
+                },
+            )
+        })?;
+        match saved {
+            Response::Saved {
+                crc: c,
+                slot,
+                stall_ms,
+            } => {
+                checked(c)?;
+                let slot = if slot == 1 { "A" } else { "B" };
+                println!(
+                    "node {}: saved to slot {slot}, the fingertip boots with it (its CPU stalled up to {stall_ms} ms)",
+                    node.get()
+                );
+            }
+            other => bail!("node {}: unexpected answer {other:?}", node.get()),
+        }
+    }
+    if activate {
+        match ask(&mut client, node, &Request::Activate)? {
+            Response::Active(c) => println!("node {}: in service, CRC-32 {c:#010x}", node.get()),
+            other => bail!("node {}: unexpected answer {other:?}", node.get()),
+        }
+    } else {
+        println!("it takes over at the next phase entry (or run with --activate)");
+    }
+    Ok(())
+}
+
+/// A key to read, or to write with its value.
+fn parse_key_arg(arg: &str) -> Result<(fingertip_can::service::Key, Option<[u8; 4]>)> {
+    use fingertip_can::service::Key;
+    let (name, value) = match arg.split_once('=') {
+        Some((k, v)) => (k.trim(), Some(v.trim())),
+        None => (arg.trim(), None),
+    };
+    let key = Key::parse(name).ok_or_else(|| {
+        let all: Vec<String> = Key::all().map(|k| k.to_string()).collect();
+        anyhow!("unknown key `{name}` (keys: {})", all.join(", "))
+    })?;
+    let value = match value {
+        None => None,
+        Some(v) if key.is_float() => {
+            let x: f32 = v
+                .parse()
+                .map_err(|_| anyhow!("{key}: `{v}` is not a number"))?;
+            if !x.is_finite() {
+                bail!("{key}: `{v}` is not finite");
+            }
+            Some(x.to_le_bytes())
+        }
+        Some(v) => {
+            let n: u32 = v
+                .parse()
+                .map_err(|_| anyhow!("{key}: `{v}` is not a whole number"))?;
+            Some(n.to_le_bytes())
+        }
+    };
+    Ok((key, value))
+}
+
+/// A key's value as text.
+fn key_value(key: fingertip_can::service::Key, v: [u8; 4]) -> String {
+    if key.is_float() {
+        format!("{}", f32::from_le_bytes(v))
+    } else {
+        format!("{}", u32::from_le_bytes(v))
+    }
+}
+
+fn calibrate_cmd(node: u8, iface: &str, keys: &[String]) -> Result<()> {
+    use fingertip_can::service::{ErrorCode, Key, Request, Response};
+    let node = node_id(node)?;
+    // Every argument checked before anything goes on the bus.
+    let args: Vec<(Key, Option<[u8; 4]>)> = if keys.is_empty() {
+        Key::all().map(|k| (k, None)).collect()
+    } else {
+        keys.iter()
+            .map(|a| parse_key_arg(a))
+            .collect::<Result<_>>()?
+    };
+    let mut client = service_client(node, iface)?;
+    let writes: Vec<(Key, [u8; 4])> = args
+        .iter()
+        .filter_map(|&(k, v)| v.map(|v| (k, v)))
+        .collect();
+    if !writes.is_empty() {
+        in_service_state(&mut client, node, |client| {
+            for &(k, v) in &writes {
+                ask(client, node, &Request::WriteKey(k, v))?;
+                println!("node {}: {k} = {} written", node.get(), key_value(k, v));
+            }
+            Ok(())
+        })?;
+    }
+    for &(k, v) in &args {
+        if v.is_some() {
+            continue;
+        }
+        match client.request(&Request::ReadKey(k))? {
+            Response::Value(v) => println!("node {}: {k} = {}", node.get(), key_value(k, v)),
+            Response::Error(ErrorCode::Key, _) => {
+                println!("node {}: {k} not set (the firmware's default)", node.get())
+            }
+            Response::Error(code, text) => return Err(refused(node, code, &text)),
+            other => bail!("node {}: unexpected answer {other:?}", node.get()),
+        }
+    }
+    Ok(())
+}
+
+fn info_cmd(node: u8, iface: &str) -> Result<()> {
+    use fingertip_can::service::{Request, Response};
+    let node = node_id(node)?;
+    let mut client = service_client(node, iface)?;
+    match client.request(&Request::Identify)? {
+        Response::Identity(i) => {
+            let [major, minor, patch] = i.version;
+            println!(
+                "node {}: firmware {major}.{minor}.{patch} (build {:08x}); detector `{}` ({}), CRC-32 {:#010x}",
+                node.get(),
+                i.build,
+                i.detector_name,
+                i.mode.name(),
+                i.detector_crc
+            );
+            if let Some(s) = i.staged_crc {
+                println!("staged: CRC-32 {s:#010x}, waiting for the next phase entry");
+            }
+            match ask(&mut client, node, &Request::LastCrash)? {
+                Response::Crash(Some(c)) => println!(
+                    "the last run stopped: {} at {:#010x}: {}",
+                    c.kind.name(),
+                    c.pc,
+                    c.message
+                ),
+                Response::Crash(None) => println!("no crash kept from the last run"),
+                other => bail!("node {}: unexpected answer {other:?}", node.get()),
+            }
+            Ok(())
+        }
+        Response::Error(code, text) => Err(refused(node, code, &text)),
+        other => bail!("node {}: unexpected answer {other:?}", node.get()),
+    }
 }
 
 fn monitor_cmd(

@@ -158,10 +158,10 @@ fn problems_are_reported_by_line_and_decoding_goes_on() {
     };
     let mut bad_crc = hex(&part(3, 30));
     bad_crc.replace_range(0..4, "0000");
-    // A status frame of page 11 with a good CRC.
-    let mut page11 = [0u8, 0, 0, 11, 0, 0, 0, 0];
-    fingertip_can::e2e::seal(MessageKind::Status.id(n), &mut page11);
-    let page11: String = page11.iter().map(|b| format!("{b:02X}")).collect();
+    // A status frame of page 17 (past the last) with a good CRC.
+    let mut page17 = [0u8, 0, 0, 17, 0, 0, 0, 0];
+    fingertip_can::e2e::seal(MessageKind::Status.id(n), &mut page17);
+    let page17: String = page17.iter().map(|b| format!("{b:02X}")).collect();
     let lines = [
         "# bench recording, controller -> fingertip 3".to_string(), // 1
         format!("(1.000000) can0 133#{}", hex(&part(0, 10))),       // 2
@@ -177,7 +177,7 @@ fn problems_are_reported_by_line_and_decoding_goes_on() {
         format!(" (1.009000)  can0  143   [5]  {}", spaced(&phase)), // 12 screen, timestamped
         "".to_string(),                                             // 13
         "(1.010000) can0 173#00000000000000000".to_string(),        // 14 odd digits
-        format!("(1.011000) can0 173#{page11}"),                    // 15 page 11: out of range
+        format!("(1.011000) can0 173#{page17}"),                    // 15 page 17: out of range
         format!("(1.012000) can0 120##1{}", hex(&ctx)),             // 16 CAN FD context
         format!("(1.013000) can0 120##1{}", &hex(&ctx)[..96]),      // 17 48 bytes: wrong length
     ];

@@ -1030,3 +1030,63 @@ fn fit_finds_what_is_separable_and_refuses_what_is_not() {
         assert!(!out_path.exists());
     }
 }
+
+/// `load`, `info` and `calibrate` refuse bad input with one line naming it, before
+/// touching the bus; a missing interface is named too.
+#[test]
+fn load_and_info_name_what_is_wrong() {
+    let dir = scratch("load");
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "rate_hz = -1.0\n").expect("write");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let approach = root.join("configs/approach.toml");
+    let approach = approach.to_str().expect("utf-8 path");
+    for (args, want) in [
+        (
+            vec!["load", approach, "--node", "15"],
+            "--node 15 must be within 0..=14",
+        ),
+        (vec!["load", "missing.toml", "--node", "3"], "missing.toml"),
+        (
+            vec!["load", bad.to_str().expect("utf-8"), "--node", "3"],
+            "bad.toml",
+        ),
+        (
+            vec!["load", approach, "--node", "3", "--iface", "nosuch0"],
+            "CAN interface nosuch0",
+        ),
+        (
+            vec!["info", "--node", "3", "--iface", "nosuch0"],
+            "CAN interface nosuch0",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "force_z.gain"],
+            "unknown key `force_z.gain`",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "force_x.gain=abc"],
+            "force_x.gain: `abc` is not a number",
+        ),
+        (
+            vec!["calibrate", "--node", "3", "node_id=-1"],
+            "node_id: `-1` is not a whole number",
+        ),
+        (
+            vec![
+                "calibrate",
+                "--node",
+                "3",
+                "node_id=4",
+                "--iface",
+                "nosuch0",
+            ],
+            "CAN interface nosuch0",
+        ),
+    ] {
+        let out = fingertip(&args);
+        assert!(!out.status.success(), "{args:?}");
+        let err = text(&out.stderr);
+        assert_eq!(err.lines().count(), 1, "{err}");
+        assert!(err.contains(want), "{args:?}: {err}");
+    }
+}

@@ -5,16 +5,18 @@
 //! is not built in: the board finds it at boot ([`crate::node_id`]).
 
 use detector_core::{Detector, DetectorTick, ImageError};
+use fingertip_can::service::DetectorName;
 use fingertip_can::{BusFormat, NodeId, Transmitter};
 
 use crate::checksum::crc32;
 use crate::engine::{BoardInfo, Engine, EngineParams, Fallback, FallbackReason, Service};
+use crate::load::check;
 
 mod consts {
     include!(concat!(env!("OUT_DIR"), "/build_consts.rs"));
 }
 
-pub use consts::{CONFIG_CHECKSUM, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
+pub use consts::{CONFIG_CHECKSUM, CONFIG_NAME, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
 
 /// The sample rate, Hz: the sample timer's ([`TRIGGER_RATE_MHZ`]), rounded; the
 /// detector's own rate is within 100 ppm of it (`build.rs` checks). The fallback reports
@@ -78,7 +80,10 @@ pub fn start<'d, T: DetectorTick>(
     let params = EngineParams::new(board, crc32(image));
     let reason = match load_detector(detector, image) {
         Ok(()) => match Engine::new(detector, tick, params) {
-            Ok(engine) => return Service::Running(engine),
+            Ok(engine) => {
+                let name = DetectorName::try_from(CONFIG_NAME).unwrap_or_default();
+                return Service::Running(engine.with_name(name));
+            }
             Err(e) => FallbackReason::Engine(e),
         },
         Err(e) => FallbackReason::Image(e),
@@ -87,6 +92,54 @@ pub fn start<'d, T: DetectorTick>(
         Fallback::new(FALLBACK_TRANSMITTER.for_node(board.node), &params, RATE_HZ),
         reason,
     )
+}
+
+/// What boot found saved in flash ([`crate::nvm::Nvm::boot_image`]), for [`start_saved`].
+#[derive(Clone, Copy, Debug)]
+pub enum Saved<'a> {
+    /// Nothing chosen: the built-in detector.
+    None,
+    /// A whole slot's image and its detector's name.
+    Image(&'a [u8], &'a DetectorName),
+    /// A slot was chosen, none is whole.
+    Broken,
+}
+
+/// Puts the detector saved in flash in service, through the interpreter, after the checks
+/// a detector received over the bus passes ([`check`]); the built-in one (see
+/// [`start`]) when nothing was saved, and also, with `FaultConfigFallback` in every
+/// heartbeat, when what was saved is broken or does not pass.
+pub fn start_saved<'d>(
+    detector: &'d mut Detector,
+    saved: Saved<'_>,
+    board: BoardInfo,
+) -> Service<'d, ApproachTick> {
+    let (image, name) = match saved {
+        Saved::None => return start(detector, DETECTOR_IMAGE, ApproachTick, board),
+        Saved::Image(image, name) => (image, name),
+        Saved::Broken => return start_built_in_fallback(detector, board),
+    };
+    if check(detector, image, RATE_HZ as f32).is_err() {
+        return start_built_in_fallback(detector, board);
+    }
+    let params = EngineParams::new(board, crc32(image));
+    match Engine::interpreted(detector, params) {
+        Ok(engine) => Service::Running(engine.with_name(name.clone())),
+        // The checks passed make an engine (the rate is the board's); should they not,
+        // the fallback.
+        Err(e) => Service::Fallback(
+            Fallback::new(FALLBACK_TRANSMITTER.for_node(board.node), &params, RATE_HZ),
+            FallbackReason::Engine(e),
+        ),
+    }
+}
+
+/// The built-in detector, with `FaultConfigFallback` raised: what was saved cannot run.
+fn start_built_in_fallback(detector: &mut Detector, board: BoardInfo) -> Service<'_, ApproachTick> {
+    match start(detector, DETECTOR_IMAGE, ApproachTick, board) {
+        Service::Running(engine) => Service::Running(engine.with_config_fallback()),
+        fallback => fallback,
+    }
 }
 
 #[cfg(test)]
@@ -247,7 +300,11 @@ mod tests {
             ApproachTick,
             board(ResetReason::PowerOn),
         );
-        assert!(matches!(service, Service::Running(_)));
+        let Service::Running(engine) = &service else {
+            panic!("the embedded detector runs")
+        };
+        assert_eq!(engine.in_service().2.as_str(), CONFIG_NAME);
+        assert!(CONFIG_SOURCE.contains(CONFIG_NAME) && !CONFIG_NAME.is_empty());
         assert_eq!(service.fallback_reason(), None);
         assert_eq!(service.rate_hz(), RATE_HZ);
         let (messages, checked_in) = run(&mut service);
@@ -280,6 +337,64 @@ mod tests {
             Some(FallbackReason::Image(_))
         ));
         assert_fallback(&mut service, crc32(short));
+    }
+
+    /// Whether the health pages of `service`'s first second all carry
+    /// `FaultConfigFallback`, and the detector runs (its stream goes out).
+    fn runs_with_fallback_flag(service: &mut Service<'_, ApproachTick>) -> (bool, bool) {
+        let (messages, _) = run(service);
+        let flagged = messages.iter().all(|m| match m {
+            Message::Status(s) => match s.page {
+                StatusPage::Health { faults, .. } => faults.contains(FaultFlags::CONFIG_FALLBACK),
+                _ => true,
+            },
+            _ => true,
+        });
+        let streams = messages.iter().any(|m| matches!(m, Message::Stream(_)));
+        (flagged, streams)
+    }
+
+    #[test]
+    fn boot_runs_the_saved_detector_or_the_built_in_one_saying_why() {
+        use fingertip_can::service::Mode;
+        let name = DetectorName::try_from("fitted").unwrap();
+        // Nothing saved: the built-in detector, no fault.
+        let mut d = Box::new(Detector::empty());
+        let mut s = start_saved(&mut d, Saved::None, board(ResetReason::PowerOn));
+        let Service::Running(e) = &s else { panic!() };
+        assert_eq!(e.in_service().0, Mode::BuiltIn);
+        assert_eq!(runs_with_fallback_flag(&mut s), (false, true));
+        // A saved detector of the board's: it runs, through the interpreter.
+        let image = crate::load::tests::small_image();
+        let mut d = Box::new(Detector::empty());
+        let mut s = start_saved(
+            &mut d,
+            Saved::Image(&image, &name),
+            board(ResetReason::PowerOn),
+        );
+        let Service::Running(e) = &s else { panic!() };
+        assert_eq!(
+            (
+                e.in_service().0,
+                e.in_service().1,
+                e.in_service().2.as_str()
+            ),
+            (Mode::Loaded, crc32(&image), "fitted")
+        );
+        assert_eq!(e.detector().events()[0].as_str(), "press");
+        assert_eq!(runs_with_fallback_flag(&mut s), (false, true));
+        // One the checks refuse (another rate), or a broken slot: the built-in detector
+        // runs, saying so.
+        let mut config = approach_config();
+        config.rate_hz = 2500.0;
+        let slow = detector_build::compile(&config).unwrap().image();
+        for saved in [Saved::Image(&slow, &name), Saved::Broken] {
+            let mut d = Box::new(Detector::empty());
+            let mut s = start_saved(&mut d, saved, board(ResetReason::PowerOn));
+            let Service::Running(e) = &s else { panic!() };
+            assert_eq!(e.in_service().1, CONFIG_CHECKSUM);
+            assert_eq!(runs_with_fallback_flag(&mut s), (true, true));
+        }
     }
 
     #[test]

@@ -133,6 +133,16 @@ impl Calibration {
     pub fn zero(&self) -> f64 {
         f64::from(self.zero.to_bits()) / 256.0
     }
+
+    /// The zero's drift, counts per °C.
+    pub fn drift(&self) -> f64 {
+        f64::from(self.drift.to_bits()) / 256.0
+    }
+
+    /// The reference temperature, °C.
+    pub fn t_ref(&self) -> f64 {
+        self.t_ref.to_f64()
+    }
 }
 
 /// A calibration with its zero compensated for the current temperature: what the

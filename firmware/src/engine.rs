@@ -9,6 +9,12 @@
 //! core's interpreter too. A generated tick belongs to one detector image, and
 //! [`Engine::new`] refuses it for any other.
 //!
+//! A detector loaded at run time ([`crate::load`]) is [staged](Engine::stage) and put in
+//! service at the next phase entry the controller commands, or at the next tick after
+//! [`Engine::activate`]: within that tick, so no tick is skipped. From then on the
+//! engine runs it through the interpreter, from a fresh state, and hands the detector it
+//! replaced back ([`Engine::take_retired`]) to be loaded into next.
+//!
 //! When the detector cannot run (its image rejected, or an engine that cannot be set up
 //! for it) the board runs a [`Fallback`] instead: the detector out of service, the
 //! heartbeat on the bus with [`FaultFlags::CONFIG_FALLBACK`]. The detector task runs
@@ -18,12 +24,14 @@
 //! [`TickRunner::step`].
 
 use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
+use fingertip_can::service::{DetectorName, Mode, NAME_MAX};
 use fingertip_can::{
     BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
     RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 use crate::channel_set::ChannelSet;
+use crate::load::Staged;
 use crate::sampling::AdcSample;
 use crate::shared::{DetectorHandle, RxShared};
 use crate::timing::{Lateness, TickTiming, budget_cycles, cycles_to_tenths_us};
@@ -95,6 +103,8 @@ impl BoardInfo {
             faults,
             tick_rate_hz,
             config_checksum: image_crc,
+            firmware: crate::version::VERSION,
+            build: crate::version::BUILD_HASH,
             ..Status::default()
         };
         status
@@ -225,6 +235,52 @@ pub struct TickResult {
 pub const LATCHED_FLAGS: FaultFlags =
     FaultFlags(FaultFlags::LATE.0 | FaultFlags::BUS_ERROR.0 | FaultFlags::TX_DROPPED.0);
 
+/// A detector's name as the status carries it: its bytes, zero-padded.
+fn name_bytes(name: &DetectorName) -> [u8; NAME_MAX] {
+    let mut b = [0u8; NAME_MAX];
+    for (d, s) in b.iter_mut().zip(name.as_bytes()) {
+        *d = *s;
+    }
+    b
+}
+
+/// A tick with the detector out of service: the board's health into `status`, and the
+/// heartbeat when due (nothing evaluated, nothing decided).
+fn heartbeat_only(
+    transmitter: &Transmitter,
+    tx: &mut TxState,
+    status: &mut Status,
+    sample: &AdcSample,
+    health: &Health,
+) -> TickResult {
+    report_health(status, health, sample, tx.dropped());
+    let output = Output::default();
+    let frames = transmitter.tick(tx, sample.tick, &output, status);
+    let heartbeat = frames.iter().any(is_status);
+    TickResult {
+        output,
+        frames,
+        heartbeat,
+    }
+}
+
+/// The receiver of a fingertip running `detector` at `rate_hz`: its phase count, the
+/// timeouts of `params`.
+fn receiver_for(
+    detector: &Detector,
+    params: &EngineParams,
+    rate_hz: u32,
+) -> Result<Receiver, EngineError> {
+    let phases = u8::try_from(detector.phases().len()).unwrap_or(u8::MAX);
+    Receiver::new(
+        params.board.node,
+        phases,
+        ms_to_ticks(params.context_timeout_ms, rate_hz),
+        ms_to_ticks(params.phase_timeout_ms, rate_hz),
+    )
+    .map_err(EngineError::Receiver)
+}
+
 fn ms_to_ticks(ms: u32, rate_hz: u32) -> Tick {
     ms.saturating_mul(rate_hz).div_ceil(1000).max(1)
 }
@@ -258,8 +314,17 @@ fn report_health(status: &mut Status, health: &Health, sample: &AdcSample, tx_dr
 
 /// The detector task's state and logic, running the tick `T`.
 pub struct Engine<'d, T: DetectorTick> {
-    detector: &'d Detector,
-    tick: T,
+    detector: &'d mut Detector,
+    /// The tick it started with; `None` once a detector loaded at run time is in service
+    /// (the interpreter runs it).
+    tick: Option<T>,
+    params: EngineParams,
+    name: DetectorName,
+    staged: Option<Staged<'d>>,
+    activate: bool,
+    retired: Option<&'d mut Detector>,
+    /// In the service state: the detector out of service, heartbeats only.
+    service: bool,
     state: State,
     map: ChannelMap,
     receiver: Receiver,
@@ -277,7 +342,7 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
     /// whose CRC-32 is `params.image_crc`, and for no other
     /// ([`EngineError::TickImage`]).
     pub fn new(
-        detector: &'d Detector,
+        detector: &'d mut Detector,
         tick: T,
         params: EngineParams,
     ) -> Result<Engine<'d, T>, EngineError> {
@@ -289,27 +354,39 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
                 loaded: params.image_crc,
             });
         }
+        Engine::build(detector, Some(tick), params)
+    }
+
+    /// An engine running `detector` through the interpreter (a detector loaded at run
+    /// time, from the bus or a flash slot), with a fresh state.
+    pub fn interpreted(
+        detector: &'d mut Detector,
+        params: EngineParams,
+    ) -> Result<Engine<'d, T>, EngineError> {
+        let mut e = Engine::build(detector, None, params)?;
+        e.status.mode = Mode::Loaded;
+        Ok(e)
+    }
+
+    fn build(
+        detector: &'d mut Detector,
+        tick: Option<T>,
+        params: EngineParams,
+    ) -> Result<Engine<'d, T>, EngineError> {
         let rate = detector.rate_hz();
         if !(1.0..=65_535.0).contains(&rate) {
             return Err(EngineError::Rate(rate));
         }
         let rate_hz = (rate + 0.5) as u32;
-        let phases = u8::try_from(detector.phases().len()).unwrap_or(u8::MAX);
         let board = params.board;
-        let receiver = Receiver::new(
-            board.node,
-            phases,
-            ms_to_ticks(params.context_timeout_ms, rate_hz),
-            ms_to_ticks(params.phase_timeout_ms, rate_hz),
-        )
-        .map_err(EngineError::Receiver)?;
+        let receiver = receiver_for(detector, &params, rate_hz)?;
         let transmitter = Transmitter::with_defaults(board.node, board.format, rate_hz)
             .map_err(EngineError::Transmitter)?;
         let status = board.status(rate_hz as u16, params.image_crc, FaultFlags(0));
         Ok(Engine {
-            detector,
             state: detector.new_state(),
             map: ChannelMap::resolve(detector),
+            detector,
             receiver,
             transmitter,
             tx: TxState::new(),
@@ -317,12 +394,113 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             applied_phase: None,
             inputs: Inputs::default(),
             tick,
+            params,
+            name: DetectorName::new(),
+            staged: None,
+            activate: false,
+            retired: None,
+            service: false,
         })
     }
 
+    /// Names the detector in service (reported in the status heartbeat and by the
+    /// service channel's identify).
+    pub fn with_name(mut self, name: DetectorName) -> Engine<'d, T> {
+        self.status.detector_name = name_bytes(&name);
+        self.name = name;
+        self
+    }
+
+    /// Raises [`FaultFlags::CONFIG_FALLBACK`] in every heartbeat: a detector saved in
+    /// flash was chosen but none is whole, and this one runs in its place.
+    pub fn with_config_fallback(mut self) -> Engine<'d, T> {
+        self.status.faults.set(FaultFlags::CONFIG_FALLBACK, true);
+        self
+    }
+
     /// The detector this engine runs.
-    pub fn detector(&self) -> &'d Detector {
+    pub fn detector(&self) -> &Detector {
         self.detector
+    }
+
+    /// The detector in service: what runs it (the tick the engine was made with, or the
+    /// interpreter for a detector loaded at run time), its image's CRC-32, its name.
+    pub fn in_service(&self) -> (Mode, u32, &DetectorName) {
+        let mode = if self.tick.is_some() {
+            Mode::BuiltIn
+        } else {
+            Mode::Loaded
+        };
+        (mode, self.status.config_checksum, &self.name)
+    }
+
+    /// Stages a detector loaded at run time: it goes into service at the next phase
+    /// entry, or at the next tick after [`Engine::activate`]. A detector staged before
+    /// and not yet in service is handed back, replaced.
+    pub fn stage(&mut self, staged: Staged<'d>) -> Option<Staged<'d>> {
+        self.staged.replace(staged)
+    }
+
+    /// The CRC-32 of the staged detector's image, if one waits.
+    pub fn staged_crc(&self) -> Option<u32> {
+        self.staged.as_ref().map(|s| s.crc)
+    }
+
+    /// Puts the staged detector in service at the next tick, in the phase the
+    /// controller last commanded. Returns whether one is staged.
+    pub fn activate(&mut self) -> bool {
+        self.activate = self.staged.is_some();
+        self.activate
+    }
+
+    /// Enters (`true`) or leaves the service state. In it the detector is out of
+    /// service: no confidence stream, no events, the heartbeat with
+    /// [`FaultFlags::SERVICE`]; ticks go on (their frames are the heartbeat's) but the
+    /// flash writes it is for stall the CPU, so the detector leaves it from a fresh state,
+    /// entering the controller's phase anew.
+    pub fn set_service(&mut self, on: bool) {
+        if self.service && !on {
+            self.state = self.detector.new_state();
+            self.applied_phase = None;
+        }
+        self.service = on;
+        self.status.faults.set(FaultFlags::SERVICE, on);
+    }
+
+    /// Whether it is in the service state.
+    pub fn in_service_state(&self) -> bool {
+        self.service
+    }
+
+    /// The detector a staged one replaced, to load into next.
+    pub fn take_retired(&mut self) -> Option<&'d mut Detector> {
+        self.retired.take()
+    }
+
+    /// Puts the staged detector in service now, from a fresh state (first phase). The
+    /// loader has checked its rate, so the transmitter stays; the receiver follows its
+    /// phase count. Nothing happens when nothing is staged.
+    fn put_in_service(&mut self) {
+        let Some(s) = self.staged.take() else {
+            return;
+        };
+        let rate_hz = u32::from(self.status.tick_rate_hz);
+        // A receiver for the new phase count; one with the old count if the new one is
+        // refused (it is not: an image holds 1..=8 phases, as the receiver takes).
+        if let Ok(r) = receiver_for(s.detector, &self.params, rate_hz) {
+            self.receiver = r;
+        }
+        let old = core::mem::replace(&mut self.detector, s.detector);
+        self.retired = Some(old);
+        self.tick = None;
+        self.state = self.detector.new_state();
+        self.map = ChannelMap::resolve(self.detector);
+        self.status.config_checksum = s.crc;
+        self.status.mode = Mode::Loaded;
+        self.status.detector_name = name_bytes(&s.name);
+        self.name = s.name;
+        // The controller's current phase is entered anew by the new detector.
+        self.applied_phase = None;
     }
 
     /// The receiver (the CAN receive task uses a copy).
@@ -357,6 +535,21 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             (receiver.inputs(rx, now), rx.link().phase())
         });
 
+        if self.service {
+            return heartbeat_only(
+                &self.transmitter,
+                &mut self.tx,
+                &mut self.status,
+                sample,
+                health,
+            );
+        }
+        // A staged detector takes over at a phase entry, or when asked to, in this tick.
+        let entering = phase.is_some_and(|p| self.applied_phase != Some((p.phase, p.sequence)));
+        if entering || self.activate {
+            self.activate = false;
+            self.put_in_service();
+        }
         // Follow the controller's phase command (a new phase, or the same phase started
         // again under a new sequence number).
         if let Some(p) = phase {
@@ -401,8 +594,12 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         self.inputs.faults = faults.into();
 
         let mut output = Output::default();
-        self.tick
-            .tick_into(&mut self.state, now, &self.inputs, &mut output);
+        match &self.tick {
+            Some(t) => t.tick_into(&mut self.state, now, &self.inputs, &mut output),
+            None => self
+                .detector
+                .tick_into(&mut self.state, now, &self.inputs, &mut output),
+        }
 
         report_health(&mut self.status, health, sample, self.tx.dropped());
         let frames = self
@@ -439,11 +636,14 @@ impl Fallback {
         Fallback {
             transmitter,
             tx: TxState::new(),
-            status: params.board.status(
-                u16::try_from(rate_hz).unwrap_or(u16::MAX),
-                params.image_crc,
-                FaultFlags::CONFIG_FALLBACK,
-            ),
+            status: Status {
+                mode: Mode::Fallback,
+                ..params.board.status(
+                    u16::try_from(rate_hz).unwrap_or(u16::MAX),
+                    params.image_crc,
+                    FaultFlags::CONFIG_FALLBACK,
+                )
+            },
         }
     }
 
@@ -455,17 +655,13 @@ impl Fallback {
     /// One sample: the board's health into the status, and the heartbeat when due (the
     /// output is empty: nothing evaluated, nothing decided).
     pub fn tick(&mut self, sample: &AdcSample, health: &Health) -> TickResult {
-        report_health(&mut self.status, health, sample, self.tx.dropped());
-        let output = Output::default();
-        let frames = self
-            .transmitter
-            .tick(&mut self.tx, sample.tick, &output, &self.status);
-        let heartbeat = frames.iter().any(is_status);
-        TickResult {
-            output,
-            frames,
-            heartbeat,
-        }
+        heartbeat_only(
+            &self.transmitter,
+            &mut self.tx,
+            &mut self.status,
+            sample,
+            health,
+        )
     }
 }
 
@@ -483,7 +679,7 @@ pub enum Service<'d, T: DetectorTick> {
 
 impl<'d, T: DetectorTick> Service<'d, T> {
     /// The detector, when it runs.
-    pub fn detector(&self) -> Option<&'d Detector> {
+    pub fn detector(&self) -> Option<&Detector> {
         match self {
             Service::Running(e) => Some(e.detector()),
             Service::Fallback(..) => None,
@@ -704,9 +900,14 @@ mod tests {
         detector_build::build(&config()).expect("builds")
     }
 
+    /// A detector of its own for an engine, alive to the end of the test.
+    fn leak(d: &Detector) -> &'static mut Detector {
+        Box::leak(Box::new(d.clone()))
+    }
+
     /// An engine running the interpreter on `d`.
     fn engine(d: &Detector) -> Engine<'_, Detector> {
-        Engine::new(d, d.clone(), params()).unwrap()
+        Engine::new(leak(d), d.clone(), params()).unwrap()
     }
 
     /// The embedded detector, loaded as the board loads it.
@@ -833,6 +1034,168 @@ mod tests {
         deliver(shared, e, now, context(now, counter, 0.05, 0.0));
     }
 
+    /// The test configuration with the press event's threshold at `threshold` N, as an
+    /// image.
+    fn image_with_threshold(threshold: f64) -> Vec<u8> {
+        let toml = TEST_CONFIG.replace("threshold = -0.5", &format!("threshold = {threshold}"));
+        let config = detector_build::Config::from_toml(&toml).expect("test config");
+        detector_build::compile(&config).expect("compiles").image()
+    }
+
+    /// Runs `e` over ticks `ticks` with a push of `force` N and fresh context; the
+    /// outputs.
+    fn push<T: DetectorTick>(
+        e: &mut Engine<'_, T>,
+        rx: &RxShared,
+        ticks: core::ops::Range<Tick>,
+        force: f64,
+    ) -> Vec<Output> {
+        ticks
+            .map(|t| {
+                if t % 5 == 0 {
+                    fresh(rx, e, t, (t / 5) as u8);
+                }
+                e.tick(&sample(t, force, 0.0), rx, &Health::default())
+                    .output
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_staged_detector_takes_over_at_the_phase_entry_in_that_tick() {
+        let d = detector();
+        let mut e = engine(&d).with_name(DetectorName::try_from("test").unwrap());
+        let rx = RxShared::new();
+        // A detector that needs 2 N to press, where this one needs 0.5.
+        let stiff = image_with_threshold(-2.0);
+        let mut spare = Detector::empty();
+        let mut loader = crate::load::Loader::new(&mut spare, 5000.0);
+        let staged = loader.stage("stiff", &stiff).unwrap();
+        assert!(e.stage(staged).is_none());
+        assert_eq!(e.staged_crc(), Some(crc32(&stiff)));
+        // Running on: the old detector presses at 1 N.
+        let before = push(&mut e, &rx, 0..50, -1.0);
+        assert!(before.iter().all(|o| o.evaluated == PRESS | BUMP));
+        assert!(before.iter().any(|o| o.confirmed & PRESS != 0));
+        let (mode, crc, name) = e.in_service();
+        assert_eq!(
+            (mode, crc, name.as_str()),
+            (Mode::BuiltIn, 0xDEAD_BEEF, "test")
+        );
+        // The controller enters phase 1 ("hold") at tick 50: the new detector runs that
+        // tick, in that phase.
+        deliver(&rx, &e, 50, phase(0, 1, 1));
+        let after = push(&mut e, &rx, 50..100, -1.0);
+        assert_eq!(
+            after[0].evaluated, BUMP,
+            "the phase entered by the new detector"
+        );
+        assert_eq!(e.staged_crc(), None);
+        let (mode, crc, name) = e.in_service();
+        assert_eq!(
+            (mode, crc, name.as_str()),
+            (Mode::Loaded, crc32(&stiff), "stiff")
+        );
+        assert_eq!(e.status().config_checksum, crc32(&stiff));
+        // Tick for tick what the new detector computes from a fresh state on the same
+        // inputs.
+        let mut reference = Detector::empty();
+        reference.load_image(&stiff).unwrap();
+        let mut fresh_engine = engine(&reference);
+        let rx2 = RxShared::new();
+        deliver(&rx2, &fresh_engine, 50, phase(0, 1, 1));
+        assert_eq!(push(&mut fresh_engine, &rx2, 50..100, -1.0), after);
+        // And the detector it replaced comes back to be loaded into next.
+        let old = e.take_retired().expect("retired");
+        assert_eq!(old.events(), d.events());
+        assert!(e.take_retired().is_none());
+    }
+
+    /// The status pages a full round of heartbeats from tick `from` sends.
+    fn status_round<T: DetectorTick>(
+        e: &mut Engine<'_, T>,
+        rx: &RxShared,
+        from: Tick,
+    ) -> Vec<StatusPage> {
+        (from..from + 250 * u32::from(fingertip_can::STATUS_PAGES))
+            .flat_map(|t| {
+                status_pages(&e.tick(&sample(t, 0.0, 0.0), rx, &Health::default()).frames)
+            })
+            .collect()
+    }
+
+    /// The name the detector-name pages spell.
+    fn spelled(pages: &[StatusPage]) -> String {
+        let mut name = [0u8; 16];
+        for p in pages {
+            if let StatusPage::DetectorName { part, bytes } = p {
+                let at = usize::from(*part) * 4;
+                name[at..at + 4].copy_from_slice(bytes);
+            }
+        }
+        String::from_utf8_lossy(&name)
+            .trim_end_matches('\0')
+            .to_string()
+    }
+
+    #[test]
+    fn the_heartbeat_tells_the_firmware_and_the_detector_in_service() {
+        let d = detector();
+        let mut e = engine(&d).with_name(DetectorName::try_from("approach-2026").unwrap());
+        let rx = RxShared::new();
+        let pages = status_round(&mut e, &rx, 0);
+        assert!(pages.contains(&StatusPage::Firmware {
+            version: crate::version::VERSION,
+            mode: Mode::BuiltIn
+        }));
+        assert!(pages.contains(&StatusPage::Build {
+            hash: crate::version::BUILD_HASH
+        }));
+        assert_eq!(spelled(&pages), "approach-2026");
+        // A loaded detector: its name, its CRC, the interpreter.
+        let lax = image_with_threshold(-0.1);
+        let mut spare = Detector::empty();
+        let mut loader = crate::load::Loader::new(&mut spare, 5000.0);
+        e.stage(loader.stage("lax-fit", &lax).unwrap());
+        e.activate();
+        let pages = status_round(&mut e, &rx, 10_000);
+        assert_eq!(spelled(&pages), "lax-fit");
+        assert!(pages.contains(&StatusPage::Config {
+            checksum: crc32(&lax)
+        }));
+        assert!(pages.contains(&StatusPage::Firmware {
+            version: crate::version::VERSION,
+            mode: Mode::Loaded
+        }));
+    }
+
+    #[test]
+    fn activation_puts_it_in_service_at_the_next_tick_in_the_current_phase() {
+        let d = detector();
+        let mut e = engine(&d);
+        let rx = RxShared::new();
+        deliver(&rx, &e, 0, phase(0, 1, 1));
+        assert!(!e.activate(), "nothing staged");
+        push(&mut e, &rx, 0..10, 0.0);
+        let lax = image_with_threshold(-0.1);
+        let mut spare = Detector::empty();
+        let mut loader = crate::load::Loader::new(&mut spare, 5000.0);
+        e.stage(loader.stage("lax", &lax).unwrap());
+        // Staged, not yet in service: 0.2 N presses nothing.
+        let out = push(&mut e, &rx, 10..20, -0.2);
+        assert!(out.iter().all(|o| o.confirmed == 0));
+        assert!(e.activate());
+        let out = push(&mut e, &rx, 20..40, -0.2);
+        assert_eq!(e.in_service().1, crc32(&lax));
+        // In phase 1, where only "bump" is evaluated: the phase was entered anew.
+        assert!(out.iter().all(|o| o.evaluated == BUMP));
+        // A phase entry without anything staged changes nothing.
+        deliver(&rx, &e, 40, phase(1, 0, 2));
+        let out = push(&mut e, &rx, 40..80, -0.2);
+        assert_eq!(e.in_service().1, crc32(&lax));
+        assert!(out.iter().any(|o| o.confirmed & PRESS != 0));
+    }
+
     #[test]
     fn channels_map_by_name() {
         let d = detector();
@@ -860,7 +1223,7 @@ mod tests {
             d.channels().len(),
             "build.rs refuses channels nothing feeds"
         );
-        let mut e = Engine::new(&d, ApproachTick, board_params()).unwrap();
+        let mut e = Engine::new(leak(&d), ApproachTick, board_params()).unwrap();
         let r = e.tick(&sample(0, 0.0, 0.0), &RxShared::new(), &Health::default());
         assert!(r.output.decisions.is_empty());
         assert!(r.heartbeat);
@@ -1082,7 +1445,7 @@ mod tests {
             clock_fallback: true,
             ..board()
         };
-        let mut e = Engine::new(&d, d.clone(), EngineParams::new(fallback_clock, 1)).unwrap();
+        let mut e = Engine::new(leak(&d), d.clone(), EngineParams::new(fallback_clock, 1)).unwrap();
         let mut pages = Vec::new();
         for t in 0..=500 {
             let r = e.tick(&sample(t, 0.0, 0.0), &RxShared::new(), &Health::default());
@@ -1161,14 +1524,14 @@ mod tests {
             .image_crc()
             .expect("a generated tick knows its image");
         assert_eq!(
-            Engine::new(&d, ApproachTick, params).err(),
+            Engine::new(leak(&d), ApproachTick, params).err(),
             Some(EngineError::TickImage { tick, loaded: crc })
         );
         // The interpreter runs whatever it is given.
-        assert!(Engine::new(&d, d.clone(), params).is_ok());
+        assert!(Engine::new(leak(&d), d.clone(), params).is_ok());
         // And the generated tick is accepted for its own image only.
         assert_eq!(tick, boot::CONFIG_CHECKSUM);
-        assert!(Engine::new(&embedded(), ApproachTick, board_params()).is_ok());
+        assert!(Engine::new(leak(&embedded()), ApproachTick, board_params()).is_ok());
     }
 
     /// The generated tick against the interpreter, each in an engine on the embedded
@@ -1178,8 +1541,8 @@ mod tests {
     #[test]
     fn the_generated_tick_is_the_interpreters_through_the_engine() {
         let d = embedded();
-        let mut interpreted = Engine::new(&d, (*d).clone(), board_params()).unwrap();
-        let mut generated = Engine::new(&d, ApproachTick, board_params()).unwrap();
+        let mut interpreted = Engine::new(leak(&d), (*d).clone(), board_params()).unwrap();
+        let mut generated = Engine::new(leak(&d), ApproachTick, board_params()).unwrap();
         let (rx_a, rx_b) = (RxShared::new(), RxShared::new());
         let mut alerted = 0;
         for k in 0..6000u32 {

@@ -31,12 +31,17 @@ use core::num::{NonZeroU8, NonZeroU16};
 use core::cell::UnsafeCell;
 use cortex_m::peripheral::DWT;
 use cortex_m::peripheral::SCB;
-use cortex_m_rt::{entry, exception};
+use cortex_m_rt::{ExceptionFrame, entry, exception};
 use defmt::{error, info, warn};
 
+use defmt_rtt as _;
+use embassy_embedded_hal::adapter::BlockingAsync;
 use embassy_executor::{Executor, InterruptExecutor, Spawner};
+use embassy_futures::block_on;
+use embassy_futures::select::{Either, select};
 use embassy_stm32::adc::{Adc, AdcChannel, AdcConfig, RingBufferedAdc, SampleTime};
 use embassy_stm32::can::{self, CanConfigurator, CanRx, Properties};
+use embassy_stm32::flash::{Blocking, Flash};
 use embassy_stm32::gpio::{Input, Pull};
 use embassy_stm32::i2c::{self, I2c, Master};
 use embassy_stm32::interrupt::{InterruptExt, Priority};
@@ -47,19 +52,24 @@ use embassy_stm32::timer::low_level::{RoundTo, Timer};
 use embassy_stm32::wdg::IndependentWatchdog;
 use embassy_stm32::{bind_interrupts, dma, interrupt};
 use embassy_sync::blocking_mutex::Mutex;
+use embassy_sync::channel::Channel;
 use embassy_sync::signal::Signal;
 use embassy_time::{Delay, Duration, Instant, Ticker};
 use static_cell::{ConstStaticCell, StaticCell};
-use {defmt_rtt as _, panic_probe as _};
 
-use core::cell::RefCell;
+use core::cell::{Cell, RefCell};
 use detector_core::Detector;
 use detector_core::Tick;
-use fingertip_can::{BusFormat, Receiver};
+use fingertip_can::service::{CrashKind, CrashReport};
+use fingertip_can::{BusFormat, CanFrame, NodeId, Receiver};
 use firmware::boot::{self, ApproachTick};
+use firmware::crash::CrashRecord;
 use firmware::engine::{BoardInfo, Service, TickRunner};
+use firmware::load::Loader;
 use firmware::node_id::{self, NodeIdError};
+use firmware::nvm::{BootImage, Nvm, SLOT_IMAGE_MAX};
 use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
+use firmware::service_end::{Mailbox, Requests, ServiceEnd};
 use firmware::shared::{
     BusHandle, CanRxHandle, DetectorHandle, Handles, RawMutex, SamplerHandle, Shared,
     TemperatureHandle, WatchdogHandle,
@@ -138,6 +148,23 @@ impl interrupt::typelevel::Handler<interrupt::typelevel::FDCAN1_IT0> for TxPump 
         TX.lock(|t| t.borrow_mut().pump(&mut regs::FdcanTx));
     }
 }
+
+/// A service-channel frame: its data and length.
+type ServiceFrame = ([u8; 64], u8);
+
+/// The spare detector a detector received over the bus is checked into.
+static SPARE: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
+/// Where the service task and the detector task meet.
+static MAILBOX: Mailbox<'static> = Mailbox::new();
+/// The service channel's end (its reassembly buffer is 8 KiB): in a static, made at boot
+/// (a `const` one would be 8 KiB of initialized data in flash).
+static SERVICE_END: StaticCell<ServiceEnd> = StaticCell::new();
+/// Frames on this node's request identifier, from the receive task to the service task.
+/// Full, a frame is dropped: the transfer breaks and the tool sends it again.
+static SERVICE_FRAMES: Channel<RawMutex, ServiceFrame, 4> = Channel::new();
+/// The receiver the receive task uses: a detector loaded at run time may have another
+/// phase count. Written by the detector task when it changes.
+static RECEIVER: Mutex<RawMutex, Cell<Option<Receiver>>> = Mutex::new(Cell::new(None));
 
 static EXECUTOR: StaticCell<Executor> = StaticCell::new();
 /// The detector, empty until boot loads the embedded image into it, in place (in .bss).
@@ -238,6 +265,54 @@ struct Board {
     can_rx: CanRx<'static>,
     can_properties: Properties,
     watchdog: IndependentWatchdog<'static, IWDG>,
+    /// The service channel's handler: the loader, the flash.
+    requests: Requests<'static, 'static, BoardFlash>,
+    node: NodeId,
+}
+
+/// The crash record, in RAM a reset leaves alone (`.uninit`): written by the panic and
+/// hard-fault handlers, read and cleared at boot ([`firmware::crash`]).
+#[unsafe(link_section = ".uninit.CRASH")]
+static mut CRASH: core::mem::MaybeUninit<CrashRecord> = core::mem::MaybeUninit::uninit();
+
+/// Keeps `report` in the crash record and resets. Interrupts off: nothing else runs.
+fn crash(report: &CrashReport) -> ! {
+    cortex_m::interrupt::disable();
+    // SAFETY: interrupts are off and this never returns: the record's one user now.
+    unsafe { (*core::ptr::addr_of_mut!(CRASH)).write(CrashRecord::empty()) }.write(report);
+    SCB::sys_reset()
+}
+
+/// The crash kept by the last run, if any, and the record cleared.
+fn last_crash() -> Option<CrashReport> {
+    // SAFETY: read once at boot, before any task or handler that writes it runs. After a
+    // power-on the RAM holds whatever pattern it came up with: every pattern is a valid
+    // array of words, and the magic and CRC-32 refuse all but a record.
+    let record = unsafe { &mut *core::ptr::addr_of_mut!(CRASH).cast::<CrashRecord>() };
+    let crash = record.read();
+    record.clear();
+    crash
+}
+
+/// A panic: its place and message kept for the next boot (the service channel's
+/// LastCrash), logged, and a reset.
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    use core::fmt::Write as _;
+    let mut report = CrashReport::new(CrashKind::Panic, 0);
+    if let Some(at) = info.location() {
+        let file = at.file().rsplit('/').next().unwrap_or("");
+        let _ = write!(report, "{file}:{}: ", at.line());
+    }
+    let _ = write!(report, "{}", info.message());
+    error!("panic: {=str}", report.message.as_str());
+    crash(&report)
+}
+
+/// A hard fault: where it happened kept for the next boot, and a reset.
+#[exception]
+unsafe fn HardFault(frame: &ExceptionFrame) -> ! {
+    crash(&CrashReport::new(CrashKind::HardFault, frame.pc()))
 }
 
 /// The clock security system saw the crystal stop: the core fell back to the internal
@@ -305,8 +380,12 @@ fn main() -> ! {
     executor.run(move |spawner: Spawner| {
         spawn!(spawner, temperature(b.sensor, sensor_handle));
         if let Some(receiver) = b.receiver {
-            spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle));
+            spawn!(spawner, can_rx(b.can_rx, receiver, can_rx_handle, b.node));
         }
+        spawn!(
+            spawner,
+            service_task(SERVICE_END.init_with(ServiceEnd::new), b.requests, b.node)
+        );
         spawn!(spawner, can_supervisor(b.can_properties, bus));
         spawn!(spawner, watchdog_task(b.watchdog, watchdog));
     })
@@ -316,8 +395,17 @@ fn main() -> ! {
 #[inline(never)]
 fn setup() -> Board {
     // The reset reason, read before the HAL touches the RCC, and cleared so the next
-    // boot reports its own.
+    // boot reports its own; and why the last run stopped, when it could tell.
     let reset = reset::reset_reason(regs::take_reset_flags());
+    let crashed = last_crash();
+    if let Some(c) = &crashed {
+        error!(
+            "the last run stopped: {=str} at {=u32:#010x}: {=str}",
+            c.kind.name(),
+            c.pc,
+            c.message.as_str()
+        );
+    }
     // A dead crystal must not hang the boot before the watchdog runs: probe it with a
     // timeout first, and fall back to the internal oscillator.
     let crystal = regs::hse_starts();
@@ -327,15 +415,22 @@ fn setup() -> Board {
     } else {
         warn!("the crystal did not start: running from the internal oscillator");
     }
-    // The node id, at run time: one image serves every finger. The flash key-value
-    // store's `node_id` key goes where `None` stands (the store is not on the board yet).
+    // What the board keeps in flash: its node id, its calibration, a saved detector. A
+    // store that cannot be read leaves the straps, the nominal calibration and the
+    // built-in detector.
+    let mut nvm: BoardNvm = Nvm::new(BlockingAsync::new(Flash::new_blocking(p.FLASH)));
+    let stored_node = block_on(nvm.node_id()).unwrap_or_else(|e| {
+        error!("flash store: {}: node id from the straps", e);
+        None
+    });
+    // The node id, at run time: one image serves every finger; the store's first.
     let straps = read_straps([
         Input::new(p.PB4, Pull::Up),
         Input::new(p.PB5, Pull::Up),
         Input::new(p.PB6, Pull::Up),
         Input::new(p.PB7, Pull::Up),
     ]);
-    let (node, node_source) = match node_id::resolve(None, straps) {
+    let (node, node_source) = match node_id::resolve(stored_node, straps) {
         Ok(found) => found,
         Err(e) => without_node_id(e),
     };
@@ -367,7 +462,22 @@ fn setup() -> Board {
 
     // The detector before anything else is built on the stack: loading the image is the
     // deepest stack of the firmware.
-    let service = build_detector(board);
+    let service = build_detector(board, &mut nvm);
+    let calibration = match block_on(nvm.calibration(&calib::NOMINAL)) {
+        Ok((c, refused)) => {
+            if !refused.is_empty() {
+                error!(
+                    "flash store: the calibration of channels {=u32:#06b} is not one: nominal kept",
+                    refused.bits()
+                );
+            }
+            c
+        }
+        Err(e) => {
+            error!("flash store: {}: nominal calibration", e);
+            calib::NOMINAL
+        }
+    };
     let rate_hz = service.rate_hz();
     match service.fallback_reason() {
         None => info!("detector in service"),
@@ -478,7 +588,7 @@ fn setup() -> Board {
         can.properties().set_standard_filter(
             StandardFilterSlot::_1,
             StandardFilter {
-                filter: FilterType::DedicatedSingle(part),
+                filter: FilterType::DedicatedDual(part, fingertip_can::service_request_id(node)),
                 action: Action::StoreInFifo0,
             },
         );
@@ -514,23 +624,60 @@ fn setup() -> Board {
         receiver,
         adc: ring,
         timer,
-        front_end: FrontEnd::new(calib::NOMINAL, rate_hz),
+        front_end: FrontEnd::new(calibration, rate_hz),
         sensor,
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
+        requests: Requests::new(Loader::new(SPARE.take(), rate_hz as f32), &MAILBOX, nvm)
+            .with_last_crash(crashed),
+        node,
     }
 }
 
-/// The detector task's service: the detector loaded from the embedded image straight
-/// into its static and the engine running the generated tick, or the fallback when the
-/// image is rejected or is not the tick's (the CRC of the image actually loaded is
-/// checked). In a static, not moved into the task: an async task's arguments are stored
-/// in its future twice (as arguments and as locals), and the engine is 3 KiB.
+/// The board's flash, under embedded-storage's async traits.
+type BoardFlash = BlockingAsync<Flash<'static, Blocking>>;
+/// The board's flash: the detector slots and the store.
+type BoardNvm = Nvm<BoardFlash>;
+
+/// The detector task's service: the detector saved in flash, through the interpreter
+/// (checked as one received over the bus), or the embedded image's through the generated
+/// tick (the CRC of the image actually loaded is checked), or the fallback when the
+/// image is rejected or is not the tick's; `FaultConfigFallback` when a saved detector
+/// was chosen but cannot run ([`boot::start_saved`]). In a static, not moved into the
+/// task: an async task's arguments are stored in its future twice (as arguments and as
+/// locals), and the engine is 3 KiB.
 #[inline(never)]
-fn build_detector(board: BoardInfo) -> &'static mut Service<'static, ApproachTick> {
+fn build_detector(
+    board: BoardInfo,
+    nvm: &mut BoardNvm,
+) -> &'static mut Service<'static, ApproachTick> {
     let detector = DETECTOR.take();
-    SERVICE.init_with(|| boot::start(detector, boot::DETECTOR_IMAGE, ApproachTick, board))
+    // The saved image is read onto the boot stack, gone before the tasks run.
+    let mut image = [0u8; SLOT_IMAGE_MAX];
+    let found = block_on(nvm.boot_image(&mut image)).unwrap_or_else(|e| {
+        error!("flash store: {}: the built-in detector", e);
+        BootImage::BuiltIn
+    });
+    let name;
+    let saved = match &found {
+        BootImage::BuiltIn => boot::Saved::None,
+        BootImage::Slot(slot, header) => {
+            info!(
+                "detector `{=str}` saved in slot {}, crc32 {=u32:#010x}",
+                header.name.as_str(),
+                slot,
+                header.crc
+            );
+            name = header.name.clone();
+            boot::Saved::Image(&image[..header.len as usize], &name)
+        }
+        BootImage::Fallback => {
+            error!("no saved detector is whole: the built-in one (FaultConfigFallback)");
+            boot::Saved::Broken
+        }
+    };
+    SERVICE.init_with(|| boot::start_saved(detector, saved, board))
 }
 
 /// The reading of the scans: the ADC and its trigger (kept alive for the DMA), the front
@@ -565,7 +712,7 @@ async fn detector_task(
     let mut runner = TickRunner::new(CORE_CLOCK_HZ, rate_hz);
     let mut picker = ScanPicker::new();
     let mut last_masks = (0u8, 0u8);
-    let detector = service.detector();
+    let mut receiver = service.receiver();
     scans.adc.start();
     scans.timer.start();
     loop {
@@ -581,6 +728,9 @@ async fn detector_task(
         if torn {
             continue;
         }
+        // What the service task posted: a staged detector, activation, the service
+        // state; and what runs, published for it.
+        MAILBOX.serve(service);
         scans.front_end.set_temperature(h.temperature());
         let mut sample = scans.front_end.process(tick, &raw);
         sample.converted_at = SCANS.completed_at(tick);
@@ -595,10 +745,18 @@ async fn detector_task(
             })
         });
 
+        // A detector put in service may have another phase count: the receive task's
+        // receiver follows.
+        if service.receiver() != receiver {
+            receiver = service.receiver();
+            RECEIVER.lock(|r| r.set(receiver));
+        }
+
         // Logs, after the timed part.
         let out = &result.output;
         for d in out.decisions.iter() {
-            let name = detector
+            let name = service
+                .detector()
                 .and_then(|det| det.events().get(usize::from(d.event.0)))
                 .map_or("?", |n| n.as_str());
             info!(
@@ -643,13 +801,28 @@ async fn temperature(
     }
 }
 
-/// Hands every received frame to the protocol's receiver, stamped with the detector's tick.
+/// Hands every received frame to the protocol's receiver, stamped with the detector's tick;
+/// the service channel's requests go to the service task.
 #[embassy_executor::task]
-async fn can_rx(mut rx: CanRx<'static>, receiver: Receiver, mut shared: CanRxHandle<'static>) {
+async fn can_rx(
+    mut rx: CanRx<'static>,
+    receiver: Receiver,
+    mut shared: CanRxHandle<'static>,
+    node: NodeId,
+) {
+    let service = fingertip_can::service_request_id(node);
     loop {
         match rx.read_fd().await {
             Ok(envelope) => {
                 let frame = &envelope.frame;
+                if *frame.id() == fingertip_can::Id::Standard(service) {
+                    let mut data = [0u8; 64];
+                    let n = frame.data().len().min(64);
+                    data[..n].copy_from_slice(&frame.data()[..n]);
+                    let _ = SERVICE_FRAMES.try_send((data, n as u8));
+                    continue;
+                }
+                let receiver = RECEIVER.lock(|r| r.get()).unwrap_or(receiver);
                 // The decoding and the CRC outside the lock, which the detector shares:
                 // under it, only the counter rule and the new values.
                 let decoded = receiver.decode(*frame.id(), frame.data());
@@ -701,6 +874,42 @@ async fn can_supervisor(properties: Properties, mut shared: BusHandle<'static>) 
         shared.set_bus_off(supervisor.bus_off());
         shared.set_state_events(supervisor.error_events().saturating_add(protocol_errors));
         ticker.next().await;
+    }
+}
+
+/// The service channel: reassembles requests, carries them out (checking and loading a
+/// detector, writing the flash in the service state), answers on the response
+/// identifier, at the status frames' priority.
+#[embassy_executor::task]
+async fn service_task(
+    end: &'static mut ServiceEnd,
+    mut requests: Requests<'static, 'static, BoardFlash>,
+    node: NodeId,
+) {
+    let response = fingertip_can::service_response_id(node);
+    loop {
+        let now = Instant::now().as_micros();
+        match select(
+            SERVICE_FRAMES.receive(),
+            embassy_time::Timer::after_millis(50),
+        )
+        .await
+        {
+            Either::First((data, len)) => {
+                let data = data.get(..usize::from(len)).unwrap_or(&[]);
+                let Some(answer) = end.on_frame(data, now, &mut requests).await else {
+                    continue;
+                };
+                if let Some(frame) = CanFrame::new_fd(response, answer.data()) {
+                    TX.lock(|t| {
+                        let mut t = t.borrow_mut();
+                        t.push(&[frame]);
+                        t.pump(&mut regs::FdcanTx);
+                    });
+                }
+            }
+            Either::Second(()) => end.poll(now),
+        }
     }
 }
 

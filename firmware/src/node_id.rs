@@ -3,15 +3,14 @@
 //!
 //! Two sources, in this order:
 //!
-//! 1. **the flash key-value store** (its `node_id` key): not on the board yet; the board
-//!    passes `None` to [`resolve`] until the store exists, and that argument is where the
-//!    store's value goes;
+//! 1. **the flash key-value store** (its `node_id` key, [`crate::nvm::Nvm::node_id`]),
+//!    passed to [`resolve`];
 //! 2. **the strap pins**: four inputs with pull-ups (see the wiring table), bit `i` the
 //!    level of strap `i`; a strap tied to ground reads 0. The node id is the 4-bit value
 //!    read, so node *n* grounds the straps whose bits are 0 in *n*: node 14 grounds strap
 //!    0 only, node 0 all four. All four open (15) means *not strapped*.
 //!
-//! The STM32G431's option bytes have no user data field, so they cannot carry it. A board
+//! The STM32G4's option bytes have no user data field, so they cannot carry it. A board
 //! with no node id from either source stays off the bus (it cannot pick one without risking
 //! another finger's) and says why on its debug log.
 

@@ -23,13 +23,14 @@
 
 use heapless::Deque;
 
-use fingertip_can::{CanFrame, MessageKind};
+use fingertip_can::{CanFrame, MessageKind, NodeId, SERVICE_RESPONSE_CLASS};
 
 /// The FDCAN's transmit buffers.
 pub const HW_BUFFERS: usize = 3;
 
-/// Longest frame the fingertip sends (the CAN FD stream), bytes.
-pub const MAX_TX_DATA: usize = 24;
+/// Longest frame the fingertip sends (a service channel response: a whole CAN FD frame),
+/// bytes.
+pub const MAX_TX_DATA: usize = 64;
 
 /// Event frames waiting for a buffer: two levels for each of eight events.
 pub const EVENT_QUEUE: usize = 16;
@@ -62,7 +63,8 @@ pub enum TxClass {
     Event,
     /// The confidence stream.
     Stream,
-    /// The status heartbeat.
+    /// The status heartbeat, and the service channel's responses (rare, and retried by
+    /// the tool when one is lost): the lowest priority, in the status queue.
     Status,
 }
 
@@ -94,8 +96,11 @@ impl TxFrame {
     /// longer than [`MAX_TX_DATA`].
     pub fn new(frame: &CanFrame) -> Option<TxFrame> {
         let id = frame.id().as_raw();
-        let (kind, _) = MessageKind::from_raw_id(id)?;
-        let class = TxClass::of(kind)?;
+        let class = if id >> 4 == SERVICE_RESPONSE_CLASS && id & 0xF <= u16::from(NodeId::MAX) {
+            TxClass::Status
+        } else {
+            TxClass::of(MessageKind::from_raw_id(id)?.0)?
+        };
         let mut data = [0u8; MAX_TX_DATA];
         data.get_mut(..frame.len())?.copy_from_slice(frame.data());
         Some(TxFrame {
@@ -673,6 +678,20 @@ mod tests {
             .unwrap();
         assert_eq!(s.push(&[ctx]).refused, 1);
         assert_eq!(s.counts().lost(), 6);
+    }
+
+    #[test]
+    fn service_responses_go_out_whole_in_the_status_class() {
+        let node = NodeId::new(4).unwrap();
+        let f = CanFrame::new_fd(fingertip_can::service_response_id(node), &[7; 64]).unwrap();
+        let t = TxFrame::new(&f).unwrap();
+        assert_eq!(
+            (t.class(), t.data(), t.id()),
+            (TxClass::Status, &[7u8; 64][..], 0x694)
+        );
+        // A request identifier is not the fingertip's to send.
+        let request = CanFrame::new_fd(fingertip_can::service_request_id(node), &[0; 8]).unwrap();
+        assert!(TxFrame::new(&request).is_none());
     }
 
     #[test]

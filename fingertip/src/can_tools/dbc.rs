@@ -526,8 +526,8 @@ fn status(node: NodeId) -> MessageDef {
             "Page",
             24,
             8,
-            10,
-            "Status page; page 0 every heartbeat, pages 1..10 in turn",
+            16,
+            "Status page; page 0 every heartbeat, pages 1..16 in turn",
         )
     });
     s.extend([
@@ -561,9 +561,10 @@ fn status(node: NodeId) -> MessageDef {
         "A tick ended after its deadline, or scans were lost, since the last heartbeat",
         "CAN controller error-passive or bus-off since the last heartbeat",
         "A frame could not be queued, or was flushed, since the last heartbeat",
-        "Detector image rejected: detector out of service, status heartbeats only",
+        "Detector image rejected: detector out of service, status heartbeats only; or no saved detector whole: the built-in one runs (DetectorMode)",
         "A sensor channel is flagged faulty",
         "Crystal not running: internal oscillator, outside the CAN FD data phase's tolerance",
+        "Service state (flash being written): detector out of service, status heartbeats only",
     ];
     for (i, (name, comment)) in FaultFlags::NAMES.iter().zip(flag_comments).enumerate() {
         s.push(on_page(sig(name, 40 + i as u32, 1, comment), 0));
@@ -697,11 +698,47 @@ fn status(node: NodeId) -> MessageDef {
             ),
             10,
         ),
+        on_page(sig("FirmwareMajor", 32, 8, "Firmware version, major"), 11),
+        on_page(sig("FirmwareMinor", 40, 8, "Firmware version, minor"), 11),
+        on_page(sig("FirmwarePatch", 48, 8, "Firmware version, patch"), 11),
+        on_page(
+            with_values(
+                ranged("DetectorMode", 56, 4, 2, "What runs the detector"),
+                fingertip_can::service::Mode::ALL
+                    .iter()
+                    .map(|&m| (m as i64, m.name()))
+                    .collect(),
+            ),
+            11,
+        ),
+        on_page(
+            sig(
+                "BuildHash",
+                32,
+                32,
+                "First 32 bits of the commit the firmware was built from",
+            ),
+            12,
+        ),
     ]);
+    for part in 0..4u8 {
+        s.push(on_page(
+            SignalDef {
+                name: format!("DetectorName{part}"),
+                ..sig(
+                    "DetectorName",
+                    32,
+                    32,
+                    "Four bytes of the active detector's name (UTF-8, zero-padded, little-endian)",
+                )
+            },
+            13 + part,
+        ));
+    }
     MessageDef {
         kind: MessageKind::Status,
         address: Address::Node(node),
-        comment: "Status heartbeat: page 0 and one of pages 1..10 every 50 ms by default",
+        comment: "Status heartbeat: page 0 and one of pages 1..16 every 50 ms by default",
         cycle_ms: Some(50),
         signals: s,
     }
@@ -1061,6 +1098,17 @@ pub fn signal_values(address: Address, message: &Message, crc: u16) -> Vec<(Stri
                     phase_not_configured,
                 ),
                 StatusPage::Config { checksum } => put("ConfigChecksum", f64::from(checksum)),
+                StatusPage::Firmware { version, mode } => {
+                    put("FirmwareMajor", f64::from(version[0]));
+                    put("FirmwareMinor", f64::from(version[1]));
+                    put("FirmwarePatch", f64::from(version[2]));
+                    put("DetectorMode", f64::from(mode as u8));
+                }
+                StatusPage::Build { hash } => put("BuildHash", f64::from(hash)),
+                StatusPage::DetectorName { part, bytes } => put(
+                    &format!("DetectorName{part}"),
+                    f64::from(u32::from_le_bytes(bytes)),
+                ),
             }
         }
     }

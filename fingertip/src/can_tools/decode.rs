@@ -585,6 +585,22 @@ fn describe_status(p: &StatusPage) -> String {
             "status    rejected: {unknown_id} unknown id, {phase_not_configured} phase not configured"
         ),
         StatusPage::Config { checksum } => format!("status    configuration 0x{checksum:08X}"),
+        StatusPage::Firmware { version, mode } => format!(
+            "status    firmware {}.{}.{}, detector {}",
+            version[0],
+            version[1],
+            version[2],
+            mode.name()
+        ),
+        StatusPage::Build { hash } => format!("status    build {hash:08x}"),
+        StatusPage::DetectorName { part, bytes } => {
+            let text: String = bytes
+                .iter()
+                .take_while(|&&b| b != 0)
+                .map(|&b| char::from(b))
+                .collect();
+            format!("status    detector name, bytes {}..: {text:?}", 4 * part)
+        }
     }
 }
 

@@ -9,6 +9,8 @@
 //! - [`monitor`]: the same, live, from a SocketCAN interface (Linux).
 //! - [`busload`]: worst-case bus load (CAN FD with bit stuffing in both phases, or classic
 //!   CAN) and event-frame latency.
+//! - [`service`]: the tool's end of the service channel (load a detector, read and write
+//!   the store's keys), retried over a lossy bus.
 //! - [`dbc`]: the published databases `fingertip-can/fingertip.dbc` (CAN FD) and
 //!   `fingertip-classic.dbc`, and their specification.
 //!
@@ -22,6 +24,7 @@ pub mod dbc;
 pub mod decode;
 #[cfg(target_os = "linux")]
 pub mod monitor;
+pub mod service;
 
 pub use busload::{BusConfig, BusReport, analyse, write_report};
 pub use candump::{LogFrame, parse_line, write_log_line};
