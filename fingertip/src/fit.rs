@@ -50,8 +50,9 @@ const MIN_LET_THROUGH: usize = 1000;
 const CONFIRM_ON: [f32; 17] = [
     0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.45, 0.5, 0.55, 0.6, 0.65, 0.7, 0.75, 0.8, 0.85, 0.9,
 ];
-/// The confirm dwells tried (ms).
-const DWELL_MS: [f32; 5] = [0.0, 0.4, 1.0, 2.0, 5.0];
+/// The confirm dwells tried, in ticks of the detector's rate (at 5 kHz: 0, 0.4, 1, 2 and
+/// 5 ms; at 10 Hz: 0, 0.2, 0.5, 1 and 2.5 s).
+const DWELL_TICKS: [f32; 5] = [0.0, 2.0, 5.0, 10.0, 25.0];
 
 /// How to fit.
 #[derive(Clone, Copy, Debug)]
@@ -639,8 +640,12 @@ pub struct Fitted {
     pub notes: Vec<Note>,
     /// Its figures on the recordings it was fitted on.
     pub trained: CorpusReport,
-    /// Its figures on the recordings held out (none held out: empty).
-    pub held: CorpusReport,
+    /// Each recording held out, scored (none held out: empty); tallied over several
+    /// folds' together, they give the cross-validated figures.
+    pub held: Vec<RecordingResult>,
+    /// The labelled events for which no candidate level kept the false confirmations
+    /// within the event's share of the budget: each got the candidate with the fewest.
+    pub over_budget: Vec<String>,
 }
 
 /// The confirmations of one candidate per event (`choice[event]`), in time order.
@@ -661,7 +666,21 @@ fn chosen(tried: &Tried, choice: &[usize], events: &[String]) -> Vec<DecisionRec
 
 /// Tallies `tried` with each event's confirmations from `choice`.
 fn tally(tried: &[Tried], choice: &[usize], events: &[String], after_s: f64) -> CorpusReport {
-    let results: Vec<RecordingResult> = tried
+    CorpusReport::tally(
+        events,
+        &scores(tried, choice, events, after_s),
+        after_s * 1e3,
+    )
+}
+
+/// Each recording of `tried` scored with each event's confirmations from `choice`.
+fn scores(
+    tried: &[Tried],
+    choice: &[usize],
+    events: &[String],
+    after_s: f64,
+) -> Vec<RecordingResult> {
+    tried
         .iter()
         .map(|t| RecordingResult {
             name: t.name.clone(),
@@ -673,8 +692,21 @@ fn tally(tried: &[Tried], choice: &[usize], events: &[String], after_s: f64) -> 
                 t.span,
             ),
         })
-        .collect();
-    CorpusReport::tally(events, &results, after_s * 1e3)
+        .collect()
+}
+
+/// The confirm levels and dwells (ms) tried at `rate_hz`: every level with every dwell of
+/// [`DWELL_TICKS`].
+fn level_grid(rate_hz: f32) -> Vec<(f32, f32)> {
+    let tick_ms = 1e3 / f64::from(rate_hz);
+    CONFIRM_ON
+        .iter()
+        .flat_map(|&on| {
+            DWELL_TICKS
+                .iter()
+                .map(move |&ticks| (on, round4(f64::from(ticks) * tick_ms)))
+        })
+        .collect()
 }
 
 /// Every set of levels' confirmations on each recording.
@@ -697,7 +729,9 @@ fn try_sets(
 
 /// Chooses every labelled event's confirm level and dwell on `train`: the most events
 /// right less the other events' windows it confirms in, its false confirmations within its
-/// share of the budget, then the shortest median latency. Each recording is replayed once
+/// share of the budget, then the shortest median latency; when no candidate keeps within
+/// the share, the fewest false confirmations, then the most right (the event is named in
+/// [`Fitted::over_budget`]). Each recording is replayed once
 /// with the fitted terms; every candidate runs on the confidences kept: first the grid's
 /// candidates for all labelled events at once, each event choosing its own; then, when
 /// events hold each other down (`excludes`), so that one event's levels change how the
@@ -712,10 +746,7 @@ pub fn fit_levels(
 ) -> Result<Fitted, FitError> {
     let names: Vec<String> = config.events.iter().map(|e| e.name.clone()).collect();
     let share = options.budget_per_hour / labelled.len().max(1) as f64;
-    let grid: Vec<(f32, f32)> = CONFIRM_ON
-        .iter()
-        .flat_map(|&on| DWELL_MS.iter().map(move |&dwell| (on, dwell)))
-        .collect();
+    let grid = level_grid(config.rate_hz);
     let compiled = detector_build::compile(config).map_err(|e| FitError::Config(e.to_string()))?;
     // The exclusions and the base's levels, the same in every candidate.
     let excluded_by: Vec<u8> = compiled.events.iter().map(|e| e.excluded_by).collect();
@@ -782,13 +813,20 @@ pub fn fit_levels(
                     - report.intrusions_by_event.get(k).copied().unwrap_or(0) as i64;
                 let latency = tally.map_or(f64::MAX, |r| r.latency_ms.median);
                 let false_count = report.false_by_event.get(k).copied().unwrap_or(0);
+                // Within the share: the most right, then the fewest false. Beyond it: the
+                // fewest false, then the most right.
+                let rank = |right: i64, false_count: usize| {
+                    let fewer = -(false_count as i64);
+                    if within(false_count) {
+                        (true, right, fewer)
+                    } else {
+                        (false, fewer, right)
+                    }
+                };
                 let better = match best[k] {
                     None => true,
                     Some((r, f, l, _)) => {
-                        let (now, was) = (
-                            (within(false_count), right, std::cmp::Reverse(false_count)),
-                            (within(f), r, std::cmp::Reverse(f)),
-                        );
+                        let (now, was) = (rank(right, false_count), rank(r, f));
                         now > was || (now == was && latency < l)
                     }
                 };
@@ -823,15 +861,30 @@ pub fn fit_levels(
     let choice: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
     let mut fitted = config.clone();
     let mut notes = Vec::new();
+    let mut over_budget = Vec::new();
     for (event, b) in fitted.events.iter_mut().zip(&best) {
         if let Some((right, false_count, latency, c)) = *b {
             let (on, dwell) = grid[c];
             *event = with_levels(event, on, dwell);
+            let per_hour = if outside_hours > 0.0 {
+                false_count as f64 / outside_hours
+            } else {
+                0.0
+            };
+            let over = per_hour > share;
+            if over {
+                over_budget.push(event.name.clone());
+            }
             notes.push(Note {
                 event: event.name.clone(),
                 item: "confirm",
                 text: format!(
-                    "on {on} for {dwell} ms: {right} events right less those of others it confirmed in, {false_count} false confirmations in {outside_hours:.3} h outside events (budget {share:.2} per hour for this event), median latency {latency:.2} ms; the alert and the `off` levels keep the base's ratios"
+                    "on {on} for {dwell} ms: {right} events right less those of others it confirmed in, {false_count} false confirmations in {outside_hours:.3} h outside events ({per_hour:.2} per hour; {}budget {share:.2} per hour for this event), median latency {latency:.2} ms; the alert and the `off` levels keep the base's ratios",
+                    if over {
+                        "OVER the "
+                    } else {
+                        ""
+                    }
                 ),
             });
         }
@@ -843,9 +896,10 @@ pub fn fit_levels(
     let only = vec![0; names.len()];
     Ok(Fitted {
         trained: tally(&scored, &only, &names, options.after_s),
-        held: tally(&held_scored, &only, &names, options.after_s),
+        held: scores(&held_scored, &only, &names, options.after_s),
         config: fitted,
         notes,
+        over_budget,
     })
 }
 
@@ -995,17 +1049,76 @@ fn comment(lines: &[String]) -> String {
     lines.iter().map(|l| format!("# {l}\n")).collect()
 }
 
+/// How the header a fit writes begins.
+const HEADER_START: &str = "Fitted by `fingertip fit`";
+
+/// The header of a fitted file: the base and the corpus it was fitted from, and how.
+pub fn header(base_name: &str, recordings: usize, options: &FitOptions) -> Vec<String> {
+    vec![
+        format!("{HEADER_START} from {base_name} on {recordings} labelled recordings: each"),
+        format!(
+            "event's first {} ms against the time outside events, confirmations counted until {} ms",
+            options.window_s * 1e3,
+            options.after_s * 1e3
+        ),
+        format!(
+            "after a labelled end, false confirmations within {} per hour. Structure as the base.",
+            options.budget_per_hour
+        ),
+        String::new(),
+    ]
+}
+
+/// A key's comment lines without those of an earlier fit (`# fitted sensor:` and the
+/// indented lines under it): what the user wrote stays.
+fn user_comments(prefix: &str) -> String {
+    let mut kept = String::new();
+    let mut in_fitted = false;
+    for line in prefix.split_inclusive('\n') {
+        let t = line.trim_start();
+        if ["context", "sensor", "confirm"]
+            .iter()
+            .any(|item| t.starts_with(&format!("# fitted {item}:")))
+        {
+            in_fitted = true;
+            continue;
+        }
+        if in_fitted && t.starts_with("#   ") {
+            continue;
+        }
+        in_fitted = false;
+        kept.push_str(line);
+    }
+    kept
+}
+
+/// `text` without the header an earlier fit wrote at its top.
+fn without_fit_header(text: &str) -> &str {
+    if !text.starts_with(&format!("# {HEADER_START}")) {
+        return text;
+    }
+    let mut rest = text;
+    while let Some((line, after)) = rest.split_once('\n') {
+        rest = after;
+        if line.trim_end() == "#" {
+            break;
+        }
+    }
+    rest
+}
+
 /// The base's TOML with the fitted numbers in place: every fitted event's terms and
-/// levels rewritten, each with a comment saying what data set it; everything else (the
-/// channels, features, phases and their comments) as the user wrote it. The text is read
-/// back and must give exactly `fitted`.
+/// levels rewritten, each with a comment saying what data set it below the user's own
+/// comments; everything else (the channels, features, phases and their comments) as the
+/// user wrote it. Refitting a fitted file replaces the earlier fit's header and comments.
+/// The text is read back and must give exactly `fitted`.
 pub fn write_toml(
     base_text: &str,
     fitted: &Config,
     notes: &[Note],
     header: &[String],
 ) -> Result<String, FitError> {
-    let mut doc: toml_edit::DocumentMut = base_text
+    let mut doc: toml_edit::DocumentMut = without_fit_header(base_text)
         .parse()
         .map_err(|e: toml_edit::TomlError| FitError::Config(e.to_string()))?;
     if let Some(events) = doc
@@ -1031,6 +1144,18 @@ pub fn write_toml(
             if !of("skipped").is_empty() {
                 continue;
             }
+            // The user's comments above each key rewritten, kept.
+            let users: Vec<(&str, String)> = ["context", "sensor", "confirm"]
+                .into_iter()
+                .map(|key| {
+                    let prefix = table
+                        .key(key)
+                        .and_then(|k| k.leaf_decor().prefix())
+                        .and_then(|p| p.as_str())
+                        .unwrap_or_default();
+                    (key, user_comments(prefix))
+                })
+                .collect();
             if !spec.context.is_empty() {
                 let terms = spec.context.iter().map(|t| {
                     let mut i = toml_edit::InlineTable::new();
@@ -1050,20 +1175,15 @@ pub fn write_toml(
             table.insert("sensor", toml_edit::value(term_array(terms)));
             table.insert("alert", toml_edit::value(level_table(&spec.alert)));
             table.insert("confirm", toml_edit::value(level_table(&spec.confirm)));
-            for (key, item) in [
-                ("context", "context"),
-                ("sensor", "sensor"),
-                ("confirm", "confirm"),
-            ] {
-                let lines = of(item);
+            for (key, user) in users {
+                let lines = of(key);
                 if let Some(mut k) = table.key_mut(key) {
-                    let prefix = if lines.is_empty() {
-                        String::new()
-                    } else {
-                        let mut all = vec![format!("fitted {item}:")];
+                    let mut prefix = user;
+                    if !lines.is_empty() {
+                        let mut all = vec![format!("fitted {key}:")];
                         all.extend(lines.iter().map(|l| format!("  {l}")));
-                        comment(&all)
-                    };
+                        prefix.push_str(&comment(&all));
+                    }
                     k.leaf_decor_mut().set_prefix(prefix);
                 }
             }
@@ -1137,6 +1257,47 @@ mod tests {
     }
 
     /// Shares follow the strengths, none above 1, what a capped one loses going to the rest.
+    /// Dwells are tried in ticks of the detector's rate: a slow log gets dwells it can
+    /// tell apart, a fast sensor sub-millisecond ones.
+    #[test]
+    fn dwells_follow_the_rate() {
+        let dwells = |rate: f32| -> Vec<f32> {
+            let mut d: Vec<f32> = level_grid(rate).iter().map(|&(_, d)| d).collect();
+            d.sort_by(f32::total_cmp);
+            d.dedup();
+            d
+        };
+        assert_eq!(dwells(10.0), [0.0, 200.0, 500.0, 1000.0, 2500.0]);
+        assert_eq!(dwells(5000.0), [0.0, 0.4, 1.0, 2.0, 5.0]);
+        assert_eq!(
+            level_grid(1000.0).len(),
+            CONFIRM_ON.len() * DWELL_TICKS.len()
+        );
+    }
+
+    /// The user's comments above a fitted key stay; an earlier fit's comments and header
+    /// go.
+    #[test]
+    fn refits_keep_the_users_comments_and_replace_the_fits() {
+        let prefix = "# mine, above\n# fitted sensor:\n#   old note\n#   another\n# mine, below\n";
+        assert_eq!(user_comments(prefix), "# mine, above\n# mine, below\n");
+        assert_eq!(user_comments("# plain\n"), "# plain\n");
+        let options = FitOptions {
+            window_s: 0.02,
+            after_s: 0.1,
+            budget_per_hour: 1.0,
+        };
+        let text = format!(
+            "{}rate_hz = 10.0\n",
+            comment(&header("b.toml", 3, &options))
+        );
+        assert_eq!(without_fit_header(&text), "rate_hz = 10.0\n");
+        assert_eq!(
+            without_fit_header("# mine\nrate_hz = 10.0\n"),
+            "# mine\nrate_hz = 10.0\n"
+        );
+    }
+
     #[test]
     fn weights_are_shared_and_capped_at_one() {
         let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);

@@ -1954,6 +1954,7 @@ fn features(
     check_ms("--window-ms", window_ms)?;
     check_ms("--after-ms", after_ms)?;
     let (detector, config_name) = load_detector(config)?;
+    warn_short_window(window_ms / 1e3, detector.rate_hz());
     let files = fingertip::corpus::find_recordings(paths)?;
     let inputs: Vec<&Path> = config
         .into_iter()
@@ -2080,6 +2081,30 @@ fn fit_figures(report: &fingertip::corpus::CorpusReport) -> String {
     line
 }
 
+/// Warns when `--window-ms` holds fewer than two ticks at the detector's rate: each event
+/// is then judged by its onset's value alone.
+fn warn_short_window(window_s: f64, rate_hz: f32) {
+    let ticks = window_s * f64::from(rate_hz);
+    if ticks < 2.0 {
+        eprintln!(
+            "warning: --window-ms {} holds {} tick(s) at the detector's {rate_hz} Hz: each event is judged by its onset's value alone; give at least {} ms",
+            window_s * 1e3,
+            ticks.ceil().max(1.0),
+            fingertip::readable(2e3 / f64::from(rate_hz))
+        );
+    }
+}
+
+/// Names the events no confirm level kept within their share of the budget.
+fn warn_over_budget(events: &[String], options: &fingertip::fit::FitOptions) {
+    for e in events {
+        eprintln!(
+            "warning: no confirm level keeps `{e}` within its share of --budget {} false confirmations per hour: it got the level with the fewest (see its comment in the file); a better feature, more labelled events, or a larger --budget",
+            options.budget_per_hour
+        );
+    }
+}
+
 /// `fit`: cross-validated by recording, then fitted on every recording and written.
 fn fit(
     paths: &[PathBuf],
@@ -2112,6 +2137,7 @@ fn fit(
     };
     let base = Config::from_toml(&base_text).with_context(|| base_name.clone())?;
     let (detector, _) = load_detector(config)?;
+    warn_short_window(options.window_s, detector.rate_hz());
     let files = fingertip::corpus::find_recordings(paths)?;
     let inputs: Vec<&Path> = config
         .into_iter()
@@ -2131,8 +2157,13 @@ fn fit(
         let events: Vec<String> = base.events.iter().map(|e| e.name.clone()).collect();
         fingertip::corpus::CorpusReport::tally(&events, &results, options.after_s * 1e3)
     };
+    let events: Vec<String> = base.events.iter().map(|e| e.name.clone()).collect();
+    let tally = |results: &[fingertip::corpus::RecordingResult]| {
+        fingertip::corpus::CorpusReport::tally(&events, results, options.after_s * 1e3)
+    };
     let k = folds.min(files.len());
     if k >= 2 {
+        let mut all_held = Vec::new();
         println!("cross-validation, {k} folds by recording (recording i in fold i mod {k}):");
         for fold in 0..k {
             let held = |i: usize| i % k == fold;
@@ -2161,31 +2192,32 @@ fn fit(
                 test.len()
             );
             println!("    fitted, training:  {}", fit_figures(&fitted.trained));
-            println!("    fitted, held out:  {}", fit_figures(&fitted.held));
+            println!(
+                "    fitted, held out:  {}",
+                fit_figures(&tally(&fitted.held))
+            );
             println!("    base,   held out:  {}", fit_figures(&base_score(&held)));
+            warn_over_budget(&fitted.over_budget, &options);
+            all_held.extend(fitted.held);
         }
+        println!("  every fold's held-out recordings together:");
+        println!("    fitted, held out:  {}", fit_figures(&tally(&all_held)));
+        println!(
+            "    base,   held out:  {}",
+            fit_figures(&base_score(&|_| true))
+        );
     }
     let fitted = fit::fit(&base, &detector, &files, &sampled.samples, &[], &options)?;
     println!("on every recording (training figures):");
     println!("    fitted: {}", fit_figures(&fitted.trained));
     println!("    base:   {}", fit_figures(&base_score(&|_| true)));
-    let header = vec![
-        format!(
-            "Fitted by `fingertip fit` from {base_name} on {} labelled recordings: each",
-            files.len()
-        ),
-        format!(
-            "event's first {} ms against the time outside events, confirmations counted until {} ms",
-            options.window_s * 1e3,
-            options.after_s * 1e3
-        ),
-        format!(
-            "after a labelled end, false confirmations within {} per hour. Structure as the base.",
-            options.budget_per_hour
-        ),
-        String::new(),
-    ];
-    let text = fit::write_toml(&base_text, &fitted.config, &fitted.notes, &header)?;
+    warn_over_budget(&fitted.over_budget, &options);
+    let text = fit::write_toml(
+        &base_text,
+        &fitted.config,
+        &fitted.notes,
+        &fit::header(&base_name, files.len(), &options),
+    )?;
     plan.write(0, text.as_bytes())?;
     plan.commit()?;
     println!("written: {}", out.display());

@@ -920,8 +920,10 @@ name = "level"
 stage = { low_pass = { input = "x", cutoff_hz = 100.0 } }
 [[event]]
 name = "bump"
+# The bump's level, low-passed.
 sensor = [{ feature = "level", weight = 1.0, cdf = { sigmoid = { low = 10.0, high = 20.0 } } }]
 alert = { on = 0.55, off = 0.35, hold_ms = 50.0 }
+# Confirmed once sure.
 confirm = { on = 0.75, off = 0.5, hold_ms = 50.0 }
 [[phase]]
 name = "main"
@@ -931,6 +933,11 @@ events = ["bump"]
 /// Two seconds at 1 kHz: noise of ±0.1 N, and three bumps of `height` for 100 ms,
 /// labelled, at seeds-dependent places.
 fn bumps(seed: u64, height: f64) -> String {
+    bumps_with_unlabelled(seed, height, false)
+}
+
+/// [`bumps`], and with `unlabelled` a fourth bump like the others, not labelled.
+fn bumps_with_unlabelled(seed: u64, height: f64, unlabelled: bool) -> String {
     let mut state = seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1;
     let mut noise = move || {
         state ^= state << 13;
@@ -942,7 +949,8 @@ fn bumps(seed: u64, height: f64) -> String {
     let mut text = String::from("t,x,truth\n");
     for k in 0..2000 {
         let on = starts.iter().any(|s| (*s..s + 100).contains(&k));
-        let x = 0.2 * noise() + if on { height } else { 0.0 };
+        let hidden = unlabelled && (1800..1900).contains(&k);
+        let x = 0.2 * noise() + if on || hidden { height } else { 0.0 };
         let label = if on { "bump" } else { "" };
         text.push_str(&format!("{},{x:.4},{label}\n", k as f64 / 1000.0));
     }
@@ -950,8 +958,10 @@ fn bumps(seed: u64, height: f64) -> String {
 }
 
 /// A corpus separable by construction is fitted to every event found and nothing false,
-/// the same file twice over; one that no feature separates, an unlabelled one, one whose
-/// channels or rate do not match are refused, the file named.
+/// the same file twice over, the user's comments kept and the held-out folds summed; a
+/// refit of the fitted file replaces the earlier fit's comments; a corpus where every
+/// level confirms falsely is fitted with a warning; one that no feature separates, an
+/// unlabelled one, one whose channels or rate do not match are refused, the file named.
 #[test]
 fn fit_finds_what_is_separable_and_refuses_what_is_not() {
     let dir = scratch("fit-bumps");
@@ -977,12 +987,83 @@ fn fit_finds_what_is_separable_and_refuses_what_is_not() {
     for p in [&a, &b] {
         let out = fit(&good, p.to_str().expect("utf-8"));
         assert!(out.status.success(), "{}", text(&out.stderr));
+        let stdout = text(&out.stdout);
+        let summed = stdout
+            .split("every fold's held-out recordings together:")
+            .nth(1)
+            .and_then(|rest| rest.lines().nth(1))
+            .unwrap_or_default();
+        assert!(summed.contains("fitted, held out:  bump 18/18"), "{stdout}");
     }
     assert_eq!(
         std::fs::read(&a).expect("a"),
         std::fs::read(&b).expect("b"),
         "fitting is deterministic"
     );
+    let fitted = std::fs::read_to_string(&a).expect("a");
+    for comment in ["# The bump's level, low-passed.", "# Confirmed once sure."] {
+        assert_eq!(fitted.matches(comment).count(), 1, "{fitted}");
+    }
+    // Refitted from the fitted file: one header, one note per item, the user's comments.
+    let again = dir.join("again.toml");
+    let out = fingertip(&[
+        "fit",
+        "--traces",
+        &good,
+        "--config",
+        a.to_str().expect("utf-8"),
+        "--out",
+        again.to_str().expect("utf-8"),
+        "--folds",
+        "0",
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let refitted = std::fs::read_to_string(&again).expect("again");
+    for once in [
+        "# Fitted by `fingertip fit`",
+        "# fitted sensor:",
+        "# fitted confirm:",
+        "# The bump's level, low-passed.",
+        "# Confirmed once sure.",
+    ] {
+        assert_eq!(refitted.matches(once).count(), 1, "{once}: {refitted}");
+    }
+    // A bump the labels leave out in every recording: no level avoids it; the fit says so.
+    let hidden = dir.join("hidden");
+    std::fs::create_dir_all(&hidden).expect("dir");
+    for seed in 1..=6 {
+        std::fs::write(
+            hidden.join(format!("r{seed}.csv")),
+            bumps_with_unlabelled(seed, 5.0, true),
+        )
+        .expect("written");
+    }
+    let over = dir.join("over.toml");
+    let out = fingertip(&[
+        "fit",
+        "--traces",
+        hidden.to_str().expect("utf-8"),
+        "--config",
+        cfg,
+        "--out",
+        over.to_str().expect("utf-8"),
+        "--folds",
+        "0",
+        "--window-ms",
+        "1",
+    ]);
+    let stderr = text(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("no confirm level keeps `bump` within its share of --budget 1"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("--window-ms 1 holds 1 tick(s) at the detector's 1000 Hz"),
+        "{stderr}"
+    );
+    let over = std::fs::read_to_string(&over).expect("written");
+    assert!(over.contains("OVER the budget"), "{over}");
     let json = dir.join("scores.json");
     let out = fingertip(&[
         "evaluate",
