@@ -7,9 +7,10 @@
 //! single threshold between the event's values and the outside ones says how well the
 //! feature alone separates them ([`Separation`]).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use detector_core::Detector;
+use rayon::prelude::*;
 
 use crate::replay::{StreamError, Streamed, replay_stream};
 use crate::trace::TraceReader;
@@ -118,14 +119,18 @@ impl FeatureSamples {
 /// Replays one recording and sorts its ticks' feature values: a labelled row within
 /// `window_s` of its event's onset goes to that event, an unlabelled row more than
 /// `after_s` past the last event's end goes outside. Returns the replay's outcome too (the
-/// detector's decisions on the recording).
-pub fn sample_recording(
+/// detector's decisions on the recording). Outside values are kept one tick in
+/// `outside_stride` (a power of two) from the start: the ones a merge into samples at that
+/// stride would keep, without holding the others meanwhile.
+fn sample_recording(
     detector: &Detector,
     file: &Path,
     window_s: f64,
     after_s: f64,
+    outside_stride: usize,
 ) -> Result<(FeatureSamples, Streamed), StreamError> {
     let mut samples = FeatureSamples::new(detector);
+    samples.outside_stride = outside_stride.max(1);
     let mut values = vec![0.0; samples.features.len()];
     let reader = TraceReader::open(file)?;
     // The labelled occurrence whose peaks are being taken, by its index among the labelled.
@@ -161,6 +166,46 @@ pub fn sample_recording(
         }
     })?;
     Ok((samples, streamed))
+}
+
+/// Samples every recording ([`sample_recording`]) into group `i % groups` (recording i
+/// of `files`; one group when `groups` is below 2), merged in file order, and returns the
+/// groups with what `each` made of every recording's replay, in file order. The
+/// recordings are replayed in parallel a few at a time, each keeping outside values at
+/// its group's stride so far, so that memory holds the groups and those few, whatever the
+/// corpus's length; the samples are those of merging every recording's in file order, and
+/// an error is the first failing file's.
+pub fn sample_groups<R: Send>(
+    detector: &Detector,
+    files: &[PathBuf],
+    window_s: f64,
+    after_s: f64,
+    groups: usize,
+    each: impl Fn(&Path, &Streamed) -> R + Sync,
+) -> Result<(Vec<FeatureSamples>, Vec<R>), StreamError> {
+    let n = groups.max(1);
+    let mut merged: Vec<FeatureSamples> = (0..n).map(|_| FeatureSamples::new(detector)).collect();
+    let mut results = Vec::with_capacity(files.len());
+    let at_once = 2 * rayon::current_num_threads();
+    for (c, chunk) in files.chunks(at_once).enumerate() {
+        let strides: Vec<usize> = (0..chunk.len())
+            .map(|j| merged[(c * at_once + j) % n].outside_stride)
+            .collect();
+        let sampled: Vec<Result<(FeatureSamples, R), StreamError>> = chunk
+            .par_iter()
+            .zip(strides)
+            .map(|(f, stride)| {
+                let (samples, streamed) = sample_recording(detector, f, window_s, after_s, stride)?;
+                Ok((samples, each(f, &streamed)))
+            })
+            .collect();
+        for one in sampled {
+            let (samples, result) = one?;
+            merged[results.len() % n].merge(samples);
+            results.push(result);
+        }
+    }
+    Ok((merged, results))
 }
 
 /// How well one feature alone tells one event from the time outside events: the single
@@ -338,5 +383,45 @@ mod tests {
         assert!(all.outside[0].len() < 2 * OUTSIDE_CAP);
         assert_eq!(all.outside_stride, 4);
         assert!(all.outside[0].windows(2).all(|w| w[1] - w[0] == 4.0));
+    }
+
+    /// A recording sampled from the start at the stride of the samples it is merged into
+    /// (as [`sample_groups`] does) merges into exactly what sampling it at stride 1 would:
+    /// for a short recording, a longer one, and one long enough to thin itself further.
+    #[test]
+    fn sampling_at_the_groups_stride_merges_as_sampling_every_tick() {
+        let recording = |stride: usize, ticks: usize| {
+            let mut r = FeatureSamples {
+                features: vec!["f".into()],
+                outside: vec![Vec::new()],
+                outside_stride: stride,
+                ..FeatureSamples::default()
+            };
+            for k in 0..ticks {
+                r.push_outside(&[k as f64]);
+            }
+            r
+        };
+        for ticks in [1001, 3 * OUTSIDE_CAP + 3, 9 * OUTSIDE_CAP + 3] {
+            // A group already at stride 4, from many short recordings.
+            let mut group = recording(1, 1000);
+            while group.outside_stride < 4 {
+                group.merge(recording(1, 1000));
+            }
+            let mut every_tick = group.clone();
+            every_tick.merge(recording(1, ticks));
+            let mut at_stride = group.clone();
+            let hinted = recording(group.outside_stride, ticks);
+            // Fewer values held, except where the recording alone thins to the stride.
+            let alone = recording(1, ticks);
+            assert!(
+                hinted.outside[0].len() < alone.outside[0].len()
+                    || alone.outside_stride >= hinted.outside_stride
+            );
+            at_stride.merge(hinted);
+            assert_eq!(at_stride.outside, every_tick.outside);
+            assert_eq!(at_stride.outside_stride, every_tick.outside_stride);
+            assert_eq!(at_stride.outside_ticks(), every_tick.outside_ticks());
+        }
     }
 }

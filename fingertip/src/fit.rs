@@ -33,8 +33,8 @@ use detector_core::{CdfSpec, LevelParams, LevelState};
 use rayon::prelude::*;
 
 use crate::corpus::{CorpusReport, RecordingResult};
-use crate::features::{FeatureSamples, best_threshold, sample_recording};
-use crate::replay::{DecisionRecord, StreamError, replay_stream};
+use crate::features::{FeatureSamples, best_threshold};
+use crate::replay::{DecisionRecord, StreamError, replay_stream_each};
 use crate::trace::TraceReader;
 
 /// The least balanced accuracy of a sensor term's feature against its event for the fit
@@ -74,6 +74,14 @@ pub enum FitError {
     /// A configuration could not be built.
     #[error("{0}")]
     Config(String),
+    /// A fold of the cross-validation failed.
+    #[error("fold {fold}: {source}")]
+    Fold {
+        /// The fold, from 1.
+        fold: usize,
+        /// What failed.
+        source: Box<FitError>,
+    },
     /// No recording labels an event of the configuration.
     #[error(
         "none of the {0} recordings labels an event of the configuration in its `truth` column: there is nothing to fit"
@@ -501,14 +509,16 @@ struct Recorded {
 }
 
 impl Recorded {
-    /// Replays `file` with `detector` (the terms fitted) and keeps what the levels need.
-    fn replay(detector: &Detector, file: &PathBuf) -> Result<Recorded, FitError> {
-        let events = detector.events().len();
-        let mut ticks = Vec::new();
-        let mut gap = 0u32;
+    /// Replays `file` with each of `detectors` (terms fitted), the file read once, and
+    /// keeps what the levels need: one per detector, in their order.
+    fn replay_each(detectors: &[&Detector], file: &PathBuf) -> Result<Vec<Recorded>, FitError> {
+        let mut kept: Vec<(Vec<(u32, Judged)>, u32)> = vec![(Vec::new(), 0); detectors.len()];
         let reader = TraceReader::open(file).map_err(StreamError::from)?;
         let name = reader.name().to_string();
-        let streamed = replay_stream(detector, reader, |tick| {
+        let streamed = replay_stream_each(detectors, reader, |d, tick| {
+            let (Some(detector), Some((ticks, gap))) = (detectors.get(d), kept.get_mut(d)) else {
+                return;
+            };
             let out = tick.output;
             let mut judged = Judged {
                 t: tick.t,
@@ -517,6 +527,7 @@ impl Recorded {
                 judged: out.evaluated & !out.unjudgeable,
                 confidences: [0; detector_core::MAX_EVENTS],
             };
+            let events = detector.events().len();
             for (e, q) in judged.confidences.iter_mut().enumerate().take(events) {
                 if judged.judged & (1 << e) != 0 {
                     *q = out.confidences[e].to_bits();
@@ -527,18 +538,22 @@ impl Recorded {
                     == (judged.phase, judged.evaluated, judged.judged)
             });
             if same && judged.confidences.iter().all(|&q| q == 0) {
-                gap += 1;
+                *gap += 1;
             } else {
-                ticks.push((gap, judged));
-                gap = 0;
+                ticks.push((*gap, judged));
+                *gap = 0;
             }
         })?;
-        Ok(Recorded {
-            name,
-            span: streamed.span_s,
-            labelled: streamed.labelled,
-            ticks,
-        })
+        Ok(streamed
+            .into_iter()
+            .zip(kept)
+            .map(|(streamed, (ticks, _))| Recorded {
+                name: name.clone(),
+                span: streamed.span_s,
+                labelled: streamed.labelled,
+                ticks,
+            })
+            .collect())
     }
 
     /// The confirmations each set of confirm levels (`sets[set][event]`) raises on these
@@ -711,7 +726,7 @@ fn level_grid(rate_hz: f32) -> Vec<(f32, f32)> {
 
 /// Every set of levels' confirmations on each recording.
 fn try_sets(
-    recorded: &[Recorded],
+    recorded: &[&Recorded],
     sets: &[Vec<LevelParams>],
     excluded_by: &[u8],
     names: &[String],
@@ -736,11 +751,12 @@ fn try_sets(
 /// candidates for all labelled events at once, each event choosing its own; then, when
 /// events hold each other down (`excludes`), so that one event's levels change how the
 /// others fare, each event's candidates again beside the others' first choices. The levels
-/// chosen are scored on `train` and on `held`.
-pub fn fit_levels(
+/// chosen are scored on `train` and on `held` (recordings replayed with `config`'s
+/// detector).
+fn fit_levels(
     config: &Config,
-    train: &[PathBuf],
-    held: &[PathBuf],
+    train: &[&Recorded],
+    held: &[&Recorded],
     options: &FitOptions,
     labelled: &[String],
 ) -> Result<Fitted, FitError> {
@@ -779,19 +795,6 @@ pub fn fit_levels(
             })
             .collect()
     };
-    let detector = build(config)?;
-    // Every recording replayed once; the levels then run on what it kept.
-    let mut recorded: Vec<Recorded> = train
-        .iter()
-        .chain(held)
-        .collect::<Vec<_>>()
-        .par_iter()
-        .map(|f| Recorded::replay(&detector, f))
-        // In file order, so that the error reported is the first file's.
-        .collect::<Vec<_>>()
-        .into_iter()
-        .collect::<Result<_, _>>()?;
-    let held_recorded = recorded.split_off(train.len());
     let mut outside_hours = 0.0;
     // For each labelled event, the best of the sets `set_for(event, candidate)` names.
     let mut choose = |tried: &[Tried], set_for: &dyn Fn(usize, usize) -> usize| {
@@ -841,7 +844,7 @@ pub fn fit_levels(
     let uniform: Vec<Vec<LevelParams>> = (0..grid.len())
         .map(|c| set_of(&vec![c; names.len()]))
         .collect();
-    let tried = try_sets(&recorded, &uniform, &excluded_by, &names);
+    let tried = try_sets(train, &uniform, &excluded_by, &names);
     let mut best = choose(&tried, &|_, c| c);
     let first: Vec<usize> = best.iter().map(|b| b.map_or(0, |b| b.3)).collect();
     if excluded_by.iter().any(|m| *m != 0) && labelled_index.len() > 1 {
@@ -854,7 +857,7 @@ pub fn fit_levels(
                 sets.push(set_of(&choice));
             }
         }
-        let tried = try_sets(&recorded, &sets, &excluded_by, &names);
+        let tried = try_sets(train, &sets, &excluded_by, &names);
         let slot = |k: usize| labelled_index.iter().position(|&e| e == k).unwrap_or(0);
         best = choose(&tried, &|k, c| slot(k) * grid.len() + c);
     }
@@ -891,8 +894,8 @@ pub fn fit_levels(
     }
     // The levels chosen, as they are, on the recordings fitted and held out.
     let chosen = [set_of(&choice)];
-    let scored = try_sets(&recorded, &chosen, &excluded_by, &names);
-    let held_scored = try_sets(&held_recorded, &chosen, &excluded_by, &names);
+    let scored = try_sets(train, &chosen, &excluded_by, &names);
+    let held_scored = try_sets(held, &chosen, &excluded_by, &names);
     let only = vec![0; names.len()];
     Ok(Fitted {
         trained: tally(&scored, &only, &names, options.after_s),
@@ -903,46 +906,15 @@ pub fn fit_levels(
     })
 }
 
-/// Every recording's feature samples, with the base detector's figures on it: both from
-/// one replay.
-pub struct Sampled {
-    /// Feature values in and outside events, per recording.
-    pub samples: Vec<FeatureSamples>,
-    /// The base detector's score, per recording.
-    pub base: Vec<RecordingResult>,
-}
-
-/// Samples the features of every recording and scores the base detector on it.
-pub fn sample_all(
+/// Merges the groups of samples `keep` says to.
+fn merged(
     detector: &Detector,
-    files: &[PathBuf],
-    options: &FitOptions,
-) -> Result<Sampled, FitError> {
-    let each: Vec<(FeatureSamples, RecordingResult)> = files
-        .par_iter()
-        .map(|f| {
-            let (samples, streamed) =
-                sample_recording(detector, f, options.window_s, options.after_s)?;
-            let result = RecordingResult::new(&f.display().to_string(), &streamed, options.after_s);
-            Ok((samples, result))
-        })
-        // In file order, so that the error reported is the first file's.
-        .collect::<Vec<_>>()
-        .into_iter()
-        .collect::<Result<_, FitError>>()?;
-    let (samples, base) = each.into_iter().unzip();
-    Ok(Sampled { samples, base })
-}
-
-/// Merges the samples of the recordings `keep` says to.
-pub fn merged(
-    detector: &Detector,
-    samples: &[FeatureSamples],
+    groups: &[FeatureSamples],
     keep: impl Fn(usize) -> bool,
 ) -> FeatureSamples {
     let mut all = FeatureSamples::new(detector);
-    for (i, s) in samples.iter().enumerate() {
-        if keep(i) {
+    for (g, s) in groups.iter().enumerate() {
+        if keep(g) {
             all.merge(s.clone());
         }
     }
@@ -960,25 +932,106 @@ pub fn labelled_events(samples: &FeatureSamples) -> Vec<String> {
         .collect()
 }
 
-/// Fits `base` on `train` (whose samples are `samples`, in order): the terms, then the
-/// levels; the result is scored on `train` and on `held`.
-pub fn fit(
+/// A fit cross-validated by recording.
+#[derive(Debug)]
+pub struct CrossValidated {
+    /// Each fold's fit, on the others' recordings, scored on its own (`held`); none when
+    /// fewer than two folds were asked for.
+    pub folds: Vec<Fitted>,
+    /// The fit on every recording (nothing held out).
+    pub whole: Fitted,
+    /// The base detector's figures on each recording, in file order.
+    pub base: Vec<RecordingResult>,
+}
+
+/// Fits `base` (built as `detector`) on `files` and, with `folds` of at least 2,
+/// cross-validates by recording: recording i is in fold i mod k (k at most the
+/// recordings), each fold fitted on the others and scored on itself. Each recording is
+/// read twice: once with `detector`, for the feature samples (merged per fold) and the
+/// base's figures, from which every fit's terms come; then once replayed with every fit's
+/// terms together, and each fit's levels run on what its replays kept.
+pub fn fit_folds(
     base: &Config,
     detector: &Detector,
-    train: &[PathBuf],
-    samples: &[FeatureSamples],
-    held: &[PathBuf],
+    files: &[PathBuf],
+    folds: usize,
     options: &FitOptions,
-) -> Result<Fitted, FitError> {
-    let all = merged(detector, samples, |_| true);
-    let labelled = labelled_events(&all);
-    if labelled.is_empty() {
-        return Err(FitError::NothingLabelled(train.len()));
-    }
-    let (terms, notes) = fit_terms(base, &all)?;
-    let mut fitted = fit_levels(&terms, train, held, options, &labelled)?;
-    fitted.notes.splice(0..0, notes);
-    Ok(fitted)
+) -> Result<CrossValidated, FitError> {
+    let k = folds.min(files.len());
+    let k = if k >= 2 { k } else { 0 };
+    // The samples per fold (one group when there are no folds), the base's figures per file.
+    let (samples, base_results) = crate::features::sample_groups(
+        detector,
+        files,
+        options.window_s,
+        options.after_s,
+        k,
+        |f, streamed| RecordingResult::new(&f.display().to_string(), streamed, options.after_s),
+    )?;
+    // Which recordings each fit holds out: the folds', then none.
+    let held = |fit: usize, i: usize| fit < k && i % k == fit;
+    let in_fold = |fit: usize, e: FitError| {
+        if fit < k {
+            FitError::Fold {
+                fold: fit + 1,
+                source: Box::new(e),
+            }
+        } else {
+            e
+        }
+    };
+    // Each fit's terms, from the samples of the recordings it is fitted on.
+    let terms = (0..=k)
+        .map(|fit| {
+            let all = merged(detector, &samples, |g| fit == k || g != fit);
+            let labelled = labelled_events(&all);
+            if labelled.is_empty() {
+                let training = (0..files.len()).filter(|&i| !held(fit, i)).count();
+                return Err(in_fold(fit, FitError::NothingLabelled(training)));
+            }
+            let (config, notes) = fit_terms(base, &all).map_err(|e| in_fold(fit, e))?;
+            Ok((config, notes, labelled))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let detectors = terms
+        .iter()
+        .enumerate()
+        .map(|(fit, (config, _, _))| build(config).map_err(|e| in_fold(fit, e)))
+        .collect::<Result<Vec<_>, _>>()?;
+    let refs: Vec<&Detector> = detectors.iter().collect();
+    // `recorded[i][fit]`: recording i replayed with that fit's terms.
+    let recorded: Vec<Vec<Recorded>> = files
+        .par_iter()
+        .map(|f| Recorded::replay_each(&refs, f))
+        // In file order, so that the error reported is the first file's.
+        .collect::<Vec<_>>()
+        .into_iter()
+        .collect::<Result<_, _>>()?;
+    let mut fits = terms
+        .into_iter()
+        .enumerate()
+        .map(|(fit, (config, notes, labelled))| {
+            let side = |held_out: bool| -> Vec<&Recorded> {
+                recorded
+                    .iter()
+                    .enumerate()
+                    .filter(|&(i, _)| held(fit, i) == held_out)
+                    .filter_map(|(_, r)| r.get(fit))
+                    .collect()
+            };
+            let mut fitted = fit_levels(&config, &side(false), &side(true), options, &labelled)
+                .map_err(|e| in_fold(fit, e))?;
+            fitted.notes.splice(0..0, notes);
+            Ok(fitted)
+        })
+        .collect::<Result<Vec<_>, FitError>>()?;
+    // The last fit holds nothing out: the whole corpus's.
+    let whole = fits.pop().ok_or(FitError::NothingLabelled(files.len()))?;
+    Ok(CrossValidated {
+        folds: fits,
+        whole,
+        base: base_results,
+    })
 }
 
 /// A TOML number for an `f32`, written as its shortest decimal (0.1, not 0.100000001).

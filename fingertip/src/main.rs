@@ -1968,27 +1968,18 @@ fn features(
         ],
     )?;
     let bar = progress(files.len(), "recordings")?;
-    let per_file: Vec<fingertip::features::FeatureSamples> = files
-        .par_iter()
-        .map(|f| {
-            let (s, _) = fingertip::features::sample_recording(
-                &detector,
-                f,
-                window_ms / 1e3,
-                after_ms / 1e3,
-            )?;
-            bar.inc(1);
-            Ok(s)
-        })
-        // In order, so that the error reported is the first one's.
-        .collect::<Vec<_>>()
-        .into_iter()
-        .collect::<Result<_>>()?;
+    let (mut groups, _) = fingertip::features::sample_groups(
+        &detector,
+        &files,
+        window_ms / 1e3,
+        after_ms / 1e3,
+        1,
+        |_, _| bar.inc(1),
+    )?;
     bar.finish_and_clear();
-    let mut samples = fingertip::features::FeatureSamples::new(&detector);
-    for s in per_file {
-        samples.merge(s);
-    }
+    let samples = groups
+        .pop()
+        .unwrap_or_else(|| fingertip::features::FeatureSamples::new(&detector));
     let table = fingertip::features::separations(&samples);
     println!(
         "{config_name} on {} recordings: each event's first {window_ms} ms against the time outside events ({} ticks, {} kept)",
@@ -2145,9 +2136,9 @@ fn fit(
         .collect();
     let plan = plan_outputs(&inputs, &[Some((out, Kind::File))])?;
     println!("fitting {base_name} on {} recordings", files.len());
-    let sampled = fit::sample_all(&detector, &files, &options)?;
+    let fitted = fit::fit_folds(&base, &detector, &files, folds, &options)?;
     let base_score = |keep: &dyn Fn(usize) -> bool| {
-        let results: Vec<_> = sampled
+        let results: Vec<_> = fitted
             .base
             .iter()
             .enumerate()
@@ -2161,35 +2152,17 @@ fn fit(
     let tally = |results: &[fingertip::corpus::RecordingResult]| {
         fingertip::corpus::CorpusReport::tally(&events, results, options.after_s * 1e3)
     };
-    let k = folds.min(files.len());
+    let k = fitted.folds.len();
     if k >= 2 {
-        let mut all_held = Vec::new();
         println!("cross-validation, {k} folds by recording (recording i in fold i mod {k}):");
-        for fold in 0..k {
+        let mut all_held = Vec::new();
+        for (fold, fitted) in fitted.folds.into_iter().enumerate() {
             let held = |i: usize| i % k == fold;
-            let pick = |side: bool| -> Vec<PathBuf> {
-                files
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| held(*i) == side)
-                    .map(|(_, f)| f.clone())
-                    .collect()
-            };
-            let (train, test) = (pick(false), pick(true));
-            let train_samples: Vec<_> = sampled
-                .samples
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| !held(*i))
-                .map(|(_, s)| s.clone())
-                .collect();
-            let fitted = fit::fit(&base, &detector, &train, &train_samples, &test, &options)
-                .with_context(|| format!("fold {}", fold + 1))?;
+            let test = (0..files.len()).filter(|&i| held(i)).count();
             println!(
-                "  fold {}: {} training, {} held out",
+                "  fold {}: {} training, {test} held out",
                 fold + 1,
-                train.len(),
-                test.len()
+                files.len() - test
             );
             println!("    fitted, training:  {}", fit_figures(&fitted.trained));
             println!(
@@ -2207,7 +2180,7 @@ fn fit(
             fit_figures(&base_score(&|_| true))
         );
     }
-    let fitted = fit::fit(&base, &detector, &files, &sampled.samples, &[], &options)?;
+    let fitted = fitted.whole;
     println!("on every recording (training figures):");
     println!("    fitted: {}", fit_figures(&fitted.trained));
     println!("    base:   {}", fit_figures(&base_score(&|_| true)));

@@ -308,36 +308,104 @@ pub struct StreamTick<'a> {
 pub fn replay_stream<R: std::io::BufRead + Send>(
     detector: &Detector,
     reader: TraceReader<R>,
-    each_tick: impl FnMut(&StreamTick<'_>),
-) -> Result<Streamed, StreamError> {
-    std::thread::scope(|scope| replay_rows(detector, ReadAhead::spawn(scope, reader), each_tick))
-}
-
-/// [`replay_stream`] once the rows are parsed on their own thread.
-fn replay_rows(
-    detector: &Detector,
-    mut reader: ReadAhead,
     mut each_tick: impl FnMut(&StreamTick<'_>),
 ) -> Result<Streamed, StreamError> {
-    let name = reader.name().to_string();
-    let names = reader.channel_names();
-    let columns: Vec<usize> = detector
-        .channels()
-        .iter()
-        .map(|channel| {
-            names
-                .iter()
-                .position(|n| n == channel.as_str())
-                .ok_or_else(|| ReplayError::MissingChannel {
-                    trace: name.clone(),
-                    channel: channel.to_string(),
-                    have: names.join(", "),
-                })
+    std::thread::scope(|scope| {
+        let reader = ReadAhead::spawn(scope, reader);
+        let mut parts = [Part::new(detector, &reader)?];
+        let read = replay_rows(&mut parts, reader, |_, tick| each_tick(tick))?;
+        let [part] = parts;
+        part.finish(&read)
+    })
+}
+
+/// [`replay_stream`] for several detectors at once, the trace read once: `each_tick` is
+/// given the detector's index with each of its ticks; the results are in the detectors'
+/// order.
+pub fn replay_stream_each<R: std::io::BufRead + Send>(
+    detectors: &[&Detector],
+    reader: TraceReader<R>,
+    each_tick: impl FnMut(usize, &StreamTick<'_>),
+) -> Result<Vec<Streamed>, StreamError> {
+    std::thread::scope(|scope| {
+        let reader = ReadAhead::spawn(scope, reader);
+        let mut parts = detectors
+            .iter()
+            .map(|d| Part::new(d, &reader))
+            .collect::<Result<Vec<_>, _>>()?;
+        let read = replay_rows(&mut parts, reader, each_tick)?;
+        parts.into_iter().map(|p| p.finish(&read)).collect()
+    })
+}
+
+/// One detector's share of a streamed replay: where its channels are in the trace, the
+/// rules its rows follow, its state.
+struct Part<'d> {
+    detector: &'d Detector,
+    columns: Vec<usize>,
+    rules: RowRules<'d>,
+    ticker: Ticker,
+    period: f64,
+}
+
+/// What a streamed replay read: the trace's name, its rows, the times of its first and
+/// last rows (s).
+struct Read {
+    name: String,
+    rows: usize,
+    span_s: (f64, f64),
+}
+
+impl<'d> Part<'d> {
+    fn new(detector: &'d Detector, reader: &ReadAhead) -> Result<Part<'d>, StreamError> {
+        let name = reader.name();
+        let names = reader.channel_names();
+        let columns = detector
+            .channels()
+            .iter()
+            .map(|channel| {
+                names
+                    .iter()
+                    .position(|n| n == channel.as_str())
+                    .ok_or_else(|| ReplayError::MissingChannel {
+                        trace: name.to_string(),
+                        channel: channel.to_string(),
+                        have: names.join(", "),
+                    })
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Part {
+            detector,
+            columns,
+            rules: RowRules::new(detector, name),
+            ticker: Ticker::new(detector),
+            period: 1.0 / f64::from(detector.rate_hz()),
         })
-        .collect::<Result<_, _>>()?;
-    let mut rules = RowRules::new(detector, &name);
-    let period = 1.0 / f64::from(detector.rate_hz());
-    let mut ticker = Ticker::new(detector);
+    }
+
+    /// The replay's results once every row is read, the rate checked.
+    fn finish(self, read: &Read) -> Result<Streamed, StreamError> {
+        let (first_t, last_t) = read.span_s;
+        let rate_hz = (read.rows - 1) as f64 / (last_t - first_t);
+        check_rate(self.detector, &read.name, rate_hz)?;
+        Ok(Streamed {
+            decisions: self.ticker.records,
+            rows: read.rows,
+            rate_hz,
+            span_s: read.span_s,
+            labelled: self.rules.labelled,
+        })
+    }
+}
+
+/// A streamed replay once the rows are parsed on their own thread: every row ticks each
+/// detector of `parts`. Returns what was read; at least two rows.
+fn replay_rows(
+    parts: &mut [Part<'_>],
+    mut reader: ReadAhead,
+    mut each_tick: impl FnMut(usize, &StreamTick<'_>),
+) -> Result<Read, StreamError> {
+    let name = reader.name().to_string();
     // Times of the first and last rows, and of the levels' ticks, which the stream forgets:
     // a tick's time is the first row's plus the tick times the period, exact for a uniform
     // trace.
@@ -347,68 +415,62 @@ fn replay_rows(
     let mut last_line = 0;
     while let Some(r) = reader.next_row()? {
         let row = rows;
-        if let Some(prev_row_t) = (row > 0).then_some(last_t)
-            && ((r.t - prev_row_t) - period).abs() > 0.01 * period
-        {
-            return Err(StreamError::Step {
-                trace: name,
-                line: r.line,
-                step: r.t - prev_row_t,
-                period,
-            });
-        }
         let t0 = *first_t.get_or_insert(r.t);
-        if let Some(p) = r.phase {
-            let id = rules.phase(p, r.line)?;
-            detector.set_phase(&mut ticker.state, id);
+        for (d, part) in parts.iter_mut().enumerate() {
+            let period = part.period;
+            if row > 0 && ((r.t - last_t) - period).abs() > 0.01 * period {
+                return Err(StreamError::Step {
+                    trace: name,
+                    line: r.line,
+                    step: r.t - last_t,
+                    period,
+                });
+            }
+            if let Some(p) = r.phase {
+                let id = part.rules.phase(p, r.line)?;
+                part.detector.set_phase(&mut part.ticker.state, id);
+            }
+            if let Some(label) = r.truth {
+                part.rules.truth(label, r.t, r.line)?;
+            }
+            let (values, columns) = (r.values, &part.columns);
+            part.ticker.tick(
+                part.detector,
+                row,
+                |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
+                |tick| t0 + f64::from(tick) * period,
+            );
+            each_tick(
+                d,
+                &StreamTick {
+                    t: r.t,
+                    row,
+                    state: &part.ticker.state,
+                    output: &part.ticker.out,
+                    labelled: &part.rules.labelled,
+                    in_event: part.rules.open,
+                },
+            );
         }
-        if let Some(label) = r.truth {
-            rules.truth(label, r.t, r.line)?;
-        }
-        let values = r.values;
-        ticker.tick(
-            detector,
-            row,
-            |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
-            |tick| t0 + f64::from(tick) * period,
-        );
-        each_tick(&StreamTick {
-            t: r.t,
-            row,
-            state: &ticker.state,
-            output: &ticker.out,
-            labelled: &rules.labelled,
-            in_event: rules.open,
-        });
         last_t = r.t;
         last_line = r.line;
         rows += 1;
     }
     match rows {
-        0 => {
-            return Err(StreamError::Trace(TraceError::NoRows {
-                file: name,
-                line: reader.header_line(),
-            }));
-        }
-        1 => {
-            return Err(StreamError::Trace(TraceError::SingleRow {
-                file: name,
-                line: last_line,
-            }));
-        }
-        _ => {}
+        0 => Err(StreamError::Trace(TraceError::NoRows {
+            file: name,
+            line: reader.header_line(),
+        })),
+        1 => Err(StreamError::Trace(TraceError::SingleRow {
+            file: name,
+            line: last_line,
+        })),
+        _ => Ok(Read {
+            name,
+            rows,
+            span_s: (first_t.unwrap_or(0.0), last_t),
+        }),
     }
-    let first_t = first_t.unwrap_or(0.0);
-    let rate_hz = (rows - 1) as f64 / (last_t - first_t);
-    check_rate(detector, &name, rate_hz)?;
-    Ok(Streamed {
-        decisions: ticker.records,
-        rows,
-        rate_hz,
-        span_s: (first_t, last_t),
-        labelled: rules.labelled,
-    })
 }
 
 /// Why a streamed replay stopped.
@@ -670,6 +732,68 @@ mod stream_tests {
                 .map(|(row, e)| (e.to_string(), trace.time()[row]));
             assert_eq!(streamed.first_truth(), truth);
         }
+    }
+
+    /// Several detectors replayed over one reading of a trace each give what their own
+    /// replay gives, each tick handed out with its detector's index; a trace one of them
+    /// refuses stops them all with that one's reason.
+    #[test]
+    fn detectors_replayed_together_each_replay_as_alone() {
+        let approach = approach();
+        let paper = detector_build::build(
+            &detector_build::Config::from_toml(include_str!("../../configs/paper.toml"))
+                .expect("parses"),
+        )
+        .expect("builds");
+        let trace = sim::simulate(
+            &Scenario::ContactSoft5,
+            &SimOptions {
+                seed: 9,
+                randomize: true,
+                ..SimOptions::default()
+            },
+        )
+        .expect("simulates");
+        let text = trace.to_csv();
+        let reader = || TraceReader::new(text.as_bytes(), "run.csv").expect("header");
+        let detectors = [&approach, &paper, &approach];
+        let mut ticks = [0; 3];
+        let together =
+            replay_stream_each(&detectors, reader(), |d, _| ticks[d] += 1).expect("replays");
+        assert_eq!(ticks, [trace.len(); 3]);
+        assert_eq!(together.len(), 3);
+        for (d, streamed) in detectors.iter().zip(&together) {
+            let alone = replay_stream(d, reader(), |_| {}).expect("replays");
+            assert_eq!(streamed.decisions.len(), alone.decisions.len());
+            for (a, b) in streamed.decisions.iter().zip(&alone.decisions) {
+                assert_eq!((&a.event, a.level, a.t_s), (&b.event, b.level, b.t_s));
+            }
+            assert_eq!(
+                (streamed.rows, streamed.span_s, &streamed.labelled),
+                (alone.rows, alone.span_s, &alone.labelled)
+            );
+        }
+        assert!(!together[0].decisions.is_empty());
+        // A truth label one of the detectors does not know is refused, naming it and the file.
+        let relabelled = text.replace(",contact\n", ",link_collision\n");
+        assert_ne!(relabelled, text);
+        let mut bus = detector_build::Config::from_toml(crate::APPROACH_TOML).expect("parses");
+        bus.events.retain(|e| e.name != "link_collision");
+        for phase in &mut bus.phases {
+            phase.events.retain(|e| e != "link_collision");
+        }
+        for event in &mut bus.events {
+            event.excludes.retain(|e| e != "link_collision");
+        }
+        let without = detector_build::build(&bus).expect("builds");
+        let e = replay_stream_each(
+            &[&approach, &without],
+            TraceReader::new(relabelled.as_bytes(), "run.csv").expect("header"),
+            |_, _| {},
+        )
+        .expect_err("refused")
+        .to_string();
+        assert!(e.contains("link_collision") && e.contains("run.csv"), "{e}");
     }
 
     /// The default detector runs its generated tick, and that tick leaves the same state
