@@ -168,8 +168,9 @@ fn sample_recording(
     Ok((samples, streamed))
 }
 
-/// Samples every recording ([`sample_recording`]) into group `i % groups` (recording i
-/// of `files`; one group when `groups` is below 2), merged in file order, and returns the
+/// Samples every recording (its ticks sorted as this module says) into group
+/// `i % groups` (recording i of `files`; one group when `groups` is below 2), merged in
+/// file order, and returns the
 /// groups with what `each` made of every recording's replay, in file order. The
 /// recordings are replayed in parallel a few at a time, each keeping outside values at
 /// its group's stride so far, so that memory holds the groups and those few, whatever the
