@@ -168,29 +168,42 @@ fn sample_recording(
     Ok((samples, streamed))
 }
 
-/// Samples every recording (its ticks sorted as this module says) into group
-/// `i % groups` (recording i of `files`; one group when `groups` is below 2), merged in
-/// file order, and returns the
-/// groups with what `each` made of every recording's replay, in file order. The
-/// recordings are replayed in parallel a few at a time, each keeping outside values at
-/// its group's stride so far, so that memory holds the groups and those few, whatever the
-/// corpus's length; the samples are those of merging every recording's in file order, and
-/// an error is the first failing file's.
-pub fn sample_groups<R: Send>(
+/// Samples every recording (its ticks sorted as this module says) into each of `sets`
+/// sets of samples that `member(set, i)` says holds recording i of `files`, and returns
+/// the sets with what `each` made of every recording's replay, in file order. Each set's
+/// samples are exactly those of sampling its recordings one by one and merging them in
+/// file order ([`FeatureSamples::merge`]), whatever the number of threads; an error is the
+/// first failing file's.
+///
+/// The recordings are replayed in parallel a few at a time (each chunk waits for its
+/// slowest), each keeping outside values at the finest stride of the sets it goes to so
+/// far: the values those merges would keep, the others never held. So the outside values
+/// held are bounded whatever the corpus's length (the cap for each set and each recording
+/// in flight); the values inside events grow with the events labelled.
+pub fn sample_sets<R: Send>(
     detector: &Detector,
     files: &[PathBuf],
     window_s: f64,
     after_s: f64,
-    groups: usize,
+    sets: usize,
+    member: impl Fn(usize, usize) -> bool,
     each: impl Fn(&Path, &Streamed) -> R + Sync,
 ) -> Result<(Vec<FeatureSamples>, Vec<R>), StreamError> {
-    let n = groups.max(1);
-    let mut merged: Vec<FeatureSamples> = (0..n).map(|_| FeatureSamples::new(detector)).collect();
+    let mut merged: Vec<FeatureSamples> =
+        (0..sets).map(|_| FeatureSamples::new(detector)).collect();
     let mut results = Vec::with_capacity(files.len());
     let at_once = 2 * rayon::current_num_threads();
     for (c, chunk) in files.chunks(at_once).enumerate() {
-        let strides: Vec<usize> = (0..chunk.len())
-            .map(|j| merged[(c * at_once + j) % n].outside_stride)
+        let first = c * at_once;
+        // A set's stride only grows, so the stride now is at most the one at its merge.
+        let strides: Vec<usize> = (first..first + chunk.len())
+            .map(|i| {
+                (0..sets)
+                    .filter(|&set| member(set, i))
+                    .map(|set| merged[set].outside_stride)
+                    .min()
+                    .unwrap_or(1)
+            })
             .collect();
         let sampled: Vec<Result<(FeatureSamples, R), StreamError>> = chunk
             .par_iter()
@@ -200,9 +213,13 @@ pub fn sample_groups<R: Send>(
                 Ok((samples, each(f, &streamed)))
             })
             .collect();
-        for one in sampled {
+        for (i, one) in (first..).zip(sampled) {
             let (samples, result) = one?;
-            merged[results.len() % n].merge(samples);
+            for (set, into) in merged.iter_mut().enumerate() {
+                if member(set, i) {
+                    into.merge(samples.clone());
+                }
+            }
             results.push(result);
         }
     }
@@ -384,6 +401,81 @@ mod tests {
         assert!(all.outside[0].len() < 2 * OUTSIDE_CAP);
         assert_eq!(all.outside_stride, 4);
         assert!(all.outside[0].windows(2).all(|w| w[1] - w[0] == 4.0));
+    }
+
+    /// [`sample_sets`] gives, for every set, what sampling each of its recordings whole and
+    /// merging them in file order gives, with one thread or several: on recordings long
+    /// enough that the sets thin their outside values, in sets that overlap.
+    #[test]
+    fn sample_sets_merge_as_whole_recordings_in_file_order() {
+        use crate::sim::{self, Scenario, SimOptions};
+        let dir = std::env::temp_dir().join(format!("sample-sets-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("scratch directory");
+        let mut files = Vec::new();
+        for (k, (scenario, duration_s)) in [
+            (Scenario::FreeMotion, Some(70.0)),
+            (Scenario::ContactHard8, None),
+            (Scenario::FreeMotion, Some(40.0)),
+            (Scenario::LinkCollision8, None),
+            (Scenario::FreeMotion, Some(70.0)),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let opts = SimOptions {
+                seed: 40 + k as u64,
+                randomize: true,
+                duration_s,
+                ..SimOptions::default()
+            };
+            let path = dir.join(format!("{k}.csv"));
+            sim::simulate(&scenario, &opts)
+                .expect("simulates")
+                .write(&path)
+                .expect("writes");
+            files.push(path);
+        }
+        let config = detector_build::Config::from_toml(crate::APPROACH_TOML).expect("parses");
+        let detector = detector_build::build(&config).expect("builds");
+        let (window_s, after_s) = (0.02, 0.1);
+        // Two folds' training sets and the whole corpus.
+        let member = |set: usize, i: usize| set == 2 || i % 2 != set;
+        let expected: Vec<FeatureSamples> = (0..3)
+            .map(|set| {
+                let mut all = FeatureSamples::new(&detector);
+                for (i, f) in files.iter().enumerate() {
+                    if member(set, i) {
+                        let (s, _) =
+                            sample_recording(&detector, f, window_s, after_s, 1).expect("samples");
+                        all.merge(s);
+                    }
+                }
+                all
+            })
+            .collect();
+        assert!(expected[2].outside_stride > 1, "the whole corpus thins");
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            let (sets, rows) = pool
+                .install(|| {
+                    sample_sets(&detector, &files, window_s, after_s, 3, member, |_, s| {
+                        s.rows
+                    })
+                })
+                .expect("samples");
+            assert_eq!(rows.len(), files.len());
+            for (got, want) in sets.iter().zip(&expected) {
+                assert_eq!(got.outside_stride, want.outside_stride, "{threads} threads");
+                assert_eq!(got.outside_ticks(), want.outside_ticks());
+                assert_eq!(got.outside, want.outside);
+                assert_eq!(got.inside, want.inside);
+                assert_eq!(got.peaks, want.peaks);
+            }
+        }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     /// A recording sampled from the start at the stride of the samples it is merged into

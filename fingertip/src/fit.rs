@@ -746,8 +746,8 @@ fn try_sets(
 /// right less the other events' windows it confirms in, its false confirmations within its
 /// share of the budget, then the shortest median latency; when no candidate keeps within
 /// the share, the fewest false confirmations, then the most right (the event is named in
-/// [`Fitted::over_budget`]). Each recording is replayed once
-/// with the fitted terms; every candidate runs on the confidences kept: first the grid's
+/// [`Fitted::over_budget`]). Every candidate runs on the confidences kept by the
+/// replays of `train` and `held` with `config`'s detector: first the grid's
 /// candidates for all labelled events at once, each event choosing its own; then, when
 /// events hold each other down (`excludes`), so that one event's levels change how the
 /// others fare, each event's candidates again beside the others' first choices. The levels
@@ -906,21 +906,6 @@ fn fit_levels(
     })
 }
 
-/// Merges the groups of samples `keep` says to.
-fn merged(
-    detector: &Detector,
-    groups: &[FeatureSamples],
-    keep: impl Fn(usize) -> bool,
-) -> FeatureSamples {
-    let mut all = FeatureSamples::new(detector);
-    for (g, s) in groups.iter().enumerate() {
-        if keep(g) {
-            all.merge(s.clone());
-        }
-    }
-    all
-}
-
 /// The events labelled in `samples`.
 pub fn labelled_events(samples: &FeatureSamples) -> Vec<String> {
     samples
@@ -936,7 +921,7 @@ pub fn labelled_events(samples: &FeatureSamples) -> Vec<String> {
 #[derive(Debug)]
 pub struct CrossValidated {
     /// Each fold's fit, on the others' recordings, scored on its own (`held`); none when
-    /// fewer than two folds were asked for.
+    /// fewer than two folds were asked for, or there are fewer than two recordings.
     pub folds: Vec<Fitted>,
     /// The fit on every recording (nothing held out).
     pub whole: Fitted,
@@ -944,12 +929,28 @@ pub struct CrossValidated {
     pub base: Vec<RecordingResult>,
 }
 
+impl CrossValidated {
+    /// Whether fold `fold` (from 0) held out recording `i` (in file order): recording i
+    /// is in fold i mod k.
+    pub fn holds_out(&self, fold: usize, i: usize) -> bool {
+        held_out(self.folds.len(), fold, i)
+    }
+}
+
+/// Whether fit `fit` of a `k`-fold cross-validation holds out recording `i`: the folds'
+/// fits (`fit < k`) hold out recording i when i mod k is theirs; the last holds out none.
+fn held_out(k: usize, fit: usize, i: usize) -> bool {
+    fit < k && i % k == fit
+}
+
 /// Fits `base` (built as `detector`) on `files` and, with `folds` of at least 2,
 /// cross-validates by recording: recording i is in fold i mod k (k at most the
 /// recordings), each fold fitted on the others and scored on itself. Each recording is
-/// read twice: once with `detector`, for the feature samples (merged per fold) and the
-/// base's figures, from which every fit's terms come; then once replayed with every fit's
-/// terms together, and each fit's levels run on what its replays kept.
+/// read twice: once with `detector`, for the feature samples (the recordings each fit is
+/// fitted on, merged in file order) and the base's figures, from which every fit's terms
+/// come; then once replayed with every fit's terms together, and each fit's levels run on
+/// what its replays kept. Memory grows with the number of fits (k + 1): each keeps its
+/// replays' ticks.
 pub fn fit_folds(
     base: &Config,
     detector: &Detector,
@@ -959,17 +960,18 @@ pub fn fit_folds(
 ) -> Result<CrossValidated, FitError> {
     let k = folds.min(files.len());
     let k = if k >= 2 { k } else { 0 };
-    // The samples per fold (one group when there are no folds), the base's figures per file.
-    let (samples, base_results) = crate::features::sample_groups(
+    // Which recordings each fit holds out: the folds', then none.
+    let held = |fit: usize, i: usize| held_out(k, fit, i);
+    // The samples each fit is fitted on, and the base's figures per file.
+    let (samples, base_results) = crate::features::sample_sets(
         detector,
         files,
         options.window_s,
         options.after_s,
-        k,
+        k + 1,
+        |fit, i| !held(fit, i),
         |f, streamed| RecordingResult::new(&f.display().to_string(), streamed, options.after_s),
     )?;
-    // Which recordings each fit holds out: the folds', then none.
-    let held = |fit: usize, i: usize| fit < k && i % k == fit;
     let in_fold = |fit: usize, e: FitError| {
         if fit < k {
             FitError::Fold {
@@ -981,15 +983,16 @@ pub fn fit_folds(
         }
     };
     // Each fit's terms, from the samples of the recordings it is fitted on.
-    let terms = (0..=k)
-        .map(|fit| {
-            let all = merged(detector, &samples, |g| fit == k || g != fit);
-            let labelled = labelled_events(&all);
+    let terms = samples
+        .iter()
+        .enumerate()
+        .map(|(fit, trained_on)| {
+            let labelled = labelled_events(trained_on);
             if labelled.is_empty() {
                 let training = (0..files.len()).filter(|&i| !held(fit, i)).count();
                 return Err(in_fold(fit, FitError::NothingLabelled(training)));
             }
-            let (config, notes) = fit_terms(base, &all).map_err(|e| in_fold(fit, e))?;
+            let (config, notes) = fit_terms(base, trained_on).map_err(|e| in_fold(fit, e))?;
             Ok((config, notes, labelled))
         })
         .collect::<Result<Vec<_>, _>>()?;
@@ -1025,8 +1028,10 @@ pub fn fit_folds(
             Ok(fitted)
         })
         .collect::<Result<Vec<_>, FitError>>()?;
-    // The last fit holds nothing out: the whole corpus's.
-    let whole = fits.pop().ok_or(FitError::NothingLabelled(files.len()))?;
+    // The last fit holds nothing out: the whole corpus's (k + 1 fits, so there is one).
+    let Some(whole) = fits.pop() else {
+        return Err(FitError::NothingLabelled(files.len()));
+    };
     Ok(CrossValidated {
         folds: fits,
         whole,

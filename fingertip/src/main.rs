@@ -284,7 +284,8 @@ enum Command {
         /// among the labelled events.
         #[arg(long, default_value_t = 1.0)]
         budget: f64,
-        /// Folds of the cross-validation, by recording (0 or 1: none).
+        /// Folds of the cross-validation, by recording (0 or 1: none). Each fold is one
+        /// more fit held in memory at once.
         #[arg(long, default_value_t = 5)]
         folds: usize,
     },
@@ -1968,12 +1969,13 @@ fn features(
         ],
     )?;
     let bar = progress(files.len(), "recordings")?;
-    let (mut groups, _) = fingertip::features::sample_groups(
+    let (mut groups, _) = fingertip::features::sample_sets(
         &detector,
         &files,
         window_ms / 1e3,
         after_ms / 1e3,
         1,
+        |_, _| true,
         |_, _| bar.inc(1),
     )?;
     bar.finish_and_clear();
@@ -2156,22 +2158,19 @@ fn fit(
     if k >= 2 {
         println!("cross-validation, {k} folds by recording (recording i in fold i mod {k}):");
         let mut all_held = Vec::new();
-        for (fold, fitted) in fitted.folds.into_iter().enumerate() {
-            let held = |i: usize| i % k == fold;
+        for (fold, one) in fitted.folds.iter().enumerate() {
+            let held = |i: usize| fitted.holds_out(fold, i);
             let test = (0..files.len()).filter(|&i| held(i)).count();
             println!(
                 "  fold {}: {} training, {test} held out",
                 fold + 1,
                 files.len() - test
             );
-            println!("    fitted, training:  {}", fit_figures(&fitted.trained));
-            println!(
-                "    fitted, held out:  {}",
-                fit_figures(&tally(&fitted.held))
-            );
+            println!("    fitted, training:  {}", fit_figures(&one.trained));
+            println!("    fitted, held out:  {}", fit_figures(&tally(&one.held)));
             println!("    base,   held out:  {}", fit_figures(&base_score(&held)));
-            warn_over_budget(&fitted.over_budget, &options);
-            all_held.extend(fitted.held);
+            warn_over_budget(&one.over_budget, &options);
+            all_held.extend(one.held.iter().cloned());
         }
         println!("  every fold's held-out recordings together:");
         println!("    fitted, held out:  {}", fit_figures(&tally(&all_held)));

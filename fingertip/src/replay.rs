@@ -284,7 +284,8 @@ impl Streamed {
     }
 }
 
-/// One tick of a streamed replay, as [`replay_stream`] hands it out.
+/// One tick of a streamed replay, as [`replay_stream`] and [`replay_stream_each`] hand it
+/// out.
 pub struct StreamTick<'a> {
     /// The row's time (s).
     pub t: f64,
@@ -756,14 +757,28 @@ mod stream_tests {
         .expect("simulates");
         let text = trace.to_csv();
         let reader = || TraceReader::new(text.as_bytes(), "run.csv").expect("header");
+        // Each tick as a detector saw it: its row, phase, confidences and first feature.
+        let digest = |tick: &StreamTick| {
+            (
+                tick.row,
+                tick.state.phase().index(),
+                tick.output.confidences.map(|c| c.to_bits()),
+                tick.state.feature(0).map(|f| f.to_bits()),
+            )
+        };
         let detectors = [&approach, &paper, &approach];
-        let mut ticks = [0; 3];
-        let together =
-            replay_stream_each(&detectors, reader(), |d, _| ticks[d] += 1).expect("replays");
-        assert_eq!(ticks, [trace.len(); 3]);
+        let mut seen = vec![Vec::new(); 3];
+        let together = replay_stream_each(&detectors, reader(), |d, tick| {
+            seen[d].push(digest(tick));
+        })
+        .expect("replays");
+        assert!(seen.iter().all(|s| s.len() == trace.len()));
+        assert_ne!(seen[0], seen[1], "two detectors, two digests");
         assert_eq!(together.len(), 3);
-        for (d, streamed) in detectors.iter().zip(&together) {
-            let alone = replay_stream(d, reader(), |_| {}).expect("replays");
+        for ((d, streamed), seen) in detectors.iter().zip(&together).zip(&seen) {
+            let mut own = Vec::new();
+            let alone = replay_stream(d, reader(), |tick| own.push(digest(tick))).expect("replays");
+            assert_eq!(seen, &own);
             assert_eq!(streamed.decisions.len(), alone.decisions.len());
             for (a, b) in streamed.decisions.iter().zip(&alone.decisions) {
                 assert_eq!((&a.event, a.level, a.t_s), (&b.event, b.level, b.t_s));
