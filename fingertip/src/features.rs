@@ -479,10 +479,10 @@ mod tests {
     }
 
     /// A recording sampled from the start at the stride of the samples it is merged into
-    /// (as [`sample_groups`] does) merges into exactly what sampling it at stride 1 would:
+    /// (as [`sample_sets`] does) merges into exactly what sampling it at stride 1 would:
     /// for a short recording, a longer one, and one long enough to thin itself further.
     #[test]
-    fn sampling_at_the_groups_stride_merges_as_sampling_every_tick() {
+    fn sampling_at_the_sets_stride_merges_as_sampling_every_tick() {
         let recording = |stride: usize, ticks: usize| {
             let mut r = FeatureSamples {
                 features: vec!["f".into()],
@@ -496,15 +496,15 @@ mod tests {
             r
         };
         for ticks in [1001, 3 * OUTSIDE_CAP + 3, 9 * OUTSIDE_CAP + 3] {
-            // A group already at stride 4, from many short recordings.
-            let mut group = recording(1, 1000);
-            while group.outside_stride < 4 {
-                group.merge(recording(1, 1000));
+            // A set of samples already at stride 4, from many short recordings.
+            let mut set = recording(1, 1000);
+            while set.outside_stride < 4 {
+                set.merge(recording(1, 1000));
             }
-            let mut every_tick = group.clone();
+            let mut every_tick = set.clone();
             every_tick.merge(recording(1, ticks));
-            let mut at_stride = group.clone();
-            let hinted = recording(group.outside_stride, ticks);
+            let mut at_stride = set.clone();
+            let hinted = recording(set.outside_stride, ticks);
             // Fewer values held, except where the recording alone thins to the stride.
             let alone = recording(1, ticks);
             assert!(
