@@ -205,16 +205,31 @@ pub fn channel_columns<'t>(
     detector: &Detector,
     trace: &'t Trace,
 ) -> Result<Vec<&'t [f64]>, ReplayError> {
+    let names = trace.channel_names();
+    Ok(channel_positions(detector, trace.name(), names)?
+        .into_iter()
+        .filter_map(|i| names.get(i).and_then(|n| trace.column(n)))
+        .collect())
+}
+
+/// Where each of `detector`'s channels is among a trace's channel `names`, in the
+/// detector's order; a channel the trace lacks is named in the error, with what it has.
+fn channel_positions(
+    detector: &Detector,
+    trace: &str,
+    names: &[String],
+) -> Result<Vec<usize>, ReplayError> {
     detector
         .channels()
         .iter()
         .map(|channel| {
-            trace
-                .column(channel)
+            names
+                .iter()
+                .position(|n| n == channel.as_str())
                 .ok_or_else(|| ReplayError::MissingChannel {
-                    trace: trace.name().to_string(),
+                    trace: trace.to_string(),
                     channel: channel.to_string(),
-                    have: trace.channel_names().join(", "),
+                    have: names.join(", "),
                 })
         })
         .collect()
@@ -360,24 +375,9 @@ struct Read {
 impl<'d> Part<'d> {
     fn new(detector: &'d Detector, reader: &ReadAhead) -> Result<Part<'d>, StreamError> {
         let name = reader.name();
-        let names = reader.channel_names();
-        let columns = detector
-            .channels()
-            .iter()
-            .map(|channel| {
-                names
-                    .iter()
-                    .position(|n| n == channel.as_str())
-                    .ok_or_else(|| ReplayError::MissingChannel {
-                        trace: name.to_string(),
-                        channel: channel.to_string(),
-                        have: names.join(", "),
-                    })
-            })
-            .collect::<Result<_, _>>()?;
         Ok(Part {
             detector,
-            columns,
+            columns: channel_positions(detector, name, reader.channel_names())?,
             rules: RowRules::new(detector, name),
             ticker: Ticker::new(detector),
             period: 1.0 / f64::from(detector.rate_hz()),
