@@ -14,8 +14,8 @@ use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL, taps_valid};
 use crate::image::{ImageError, Reader, Section};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::state::{
-    EventId, EventState, Inputs, LevelParams, ONE, Output, PhaseId, State, clear_psi, decide_event,
-    eq14, eval_psi, load_sample, product, psi_value, reset_event, step_feature,
+    EventId, EventState, Inputs, LevelParams, ONE, Output, PhaseId, State, StateError, clear_psi,
+    decide_event, eq14, eval_psi, load_sample, product, psi_value, reset_event, step_feature,
 };
 use crate::tick::DetectorTick;
 use crate::{
@@ -335,6 +335,22 @@ impl Detector {
             events: [EventState::default(); MAX_EVENTS],
             phase: 0,
         }
+    }
+
+    /// The state saved by [`State::save`] in `bytes`, checked against this detector:
+    /// its phase one of the detector's, every feature's running state one its stage can
+    /// reach. A tick on the state returned does what it did where it was saved.
+    pub fn restore(&self, bytes: &[u8]) -> Result<State, StateError> {
+        let state = State::read_saved(bytes)?;
+        if usize::from(state.phase) >= self.phase_names.len() {
+            return Err(StateError::Phase(state.phase, self.phase_names.len()));
+        }
+        for (k, (stage, st)) in self.stages.iter().zip(&state.stages).enumerate() {
+            if !stage.admits(st, &state.ring) {
+                return Err(StateError::Feature(k));
+            }
+        }
+        Ok(state)
     }
 
     /// The detector rate in Hz.

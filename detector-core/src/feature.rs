@@ -432,6 +432,97 @@ pub(crate) struct StageState {
     primed: bool,
 }
 
+impl StageState {
+    /// Bytes of a saved stage state: `acc` (`i64`), `prev` (`i32`), `pos` (`u16`),
+    /// `primed` (0 or 1), little-endian.
+    pub(crate) const BYTES: usize = 15;
+
+    /// Writes the saved form.
+    pub(crate) fn save(&self) -> [u8; StageState::BYTES] {
+        let mut b = [0u8; StageState::BYTES];
+        let (acc, rest) = b.split_at_mut(8);
+        acc.copy_from_slice(&self.acc.to_le_bytes());
+        let (prev, rest) = rest.split_at_mut(4);
+        prev.copy_from_slice(&self.prev.to_le_bytes());
+        let (pos, primed) = rest.split_at_mut(2);
+        pos.copy_from_slice(&self.pos.to_le_bytes());
+        primed[0] = u8::from(self.primed);
+        b
+    }
+
+    /// Reads the saved form; `None` when the flag byte is neither 0 nor 1.
+    pub(crate) fn restore(b: [u8; StageState::BYTES]) -> Option<StageState> {
+        let [
+            a0,
+            a1,
+            a2,
+            a3,
+            a4,
+            a5,
+            a6,
+            a7,
+            p0,
+            p1,
+            p2,
+            p3,
+            s0,
+            s1,
+            primed,
+        ] = b;
+        Some(StageState {
+            acc: i64::from_le_bytes([a0, a1, a2, a3, a4, a5, a6, a7]),
+            prev: i32::from_le_bytes([p0, p1, p2, p3]),
+            pos: u16::from_le_bytes([s0, s1]),
+            primed: match primed {
+                0 => false,
+                1 => true,
+                _ => return None,
+            },
+        })
+    }
+}
+
+impl Stage {
+    /// Whether `st`, with the stage's share of the window history `ring`, is a state
+    /// this stage can have reached: a filter's output within `i32`, a window's position
+    /// inside it, its running sum and entries within what its inputs make. A state
+    /// read from outside (a recording) is held to this before a tick runs on it, so
+    /// that no arithmetic of the tick can overflow.
+    pub(crate) fn admits(&self, st: &StageState, ring: &[u64; WINDOW_POOL]) -> bool {
+        let window = |offset: u16, len: u16| {
+            let start = usize::from(offset);
+            ring.get(start..start + usize::from(len))
+                .filter(|_| st.pos < len)
+        };
+        match self.0 {
+            StageKind::LowPass { .. }
+            | StageKind::Envelope { .. }
+            | StageKind::HighPass { .. }
+            | StageKind::Cancel { .. } => i32::try_from(st.acc >> 16).is_ok(),
+            StageKind::Mean { offset, len, .. } => {
+                let limit = i64::from(len) << 31;
+                window(offset, len).is_some_and(|h| {
+                    st.acc.unsigned_abs() <= limit as u64
+                        && h.iter().all(|&e| i32::try_from(e as i64).is_ok())
+                })
+            }
+            StageKind::Ste { offset, len, .. } => {
+                let square_limit = ((STE_INPUT_LIMIT * STE_INPUT_LIMIT) >> 16) as u64;
+                window(offset, len).is_some_and(|h| {
+                    (0..=i64::from(len) << 38).contains(&st.acc)
+                        && h.iter().all(|&e| e <= square_limit)
+                })
+            }
+            StageKind::Raw(_)
+            | StageKind::Abs(_)
+            | StageKind::Rate { .. }
+            | StageKind::Difference { .. }
+            | StageKind::Dot(_)
+            | StageKind::Magnitude(..) => true,
+        }
+    }
+}
+
 /// The most samples a low-pass warms up over (its sample counter's range).
 const WARM_LIMIT: u16 = u16::MAX;
 

@@ -22,7 +22,8 @@ pub use feature::{Stage, StageError, StageSpec, Window};
 pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 pub use state::{
-    Decision, EventId, Inputs, Level, LevelParams, LevelState, Output, PhaseId, State,
+    Decision, EventId, Inputs, Level, LevelParams, LevelState, Output, PhaseId, SAVED_MAGIC, State,
+    StateError,
 };
 pub use tick::DetectorTick;
 

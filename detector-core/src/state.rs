@@ -305,6 +305,184 @@ impl State {
     pub fn phase(&self) -> PhaseId {
         PhaseId(self.phase)
     }
+
+    /// Bytes of a saved state ([`State::save`]).
+    pub const SAVED_BYTES: usize = 4
+        + 1
+        + 4 * MAX_SLOTS
+        + StageState::BYTES * MAX_FEATURES
+        + 8 * WINDOW_POOL
+        + 2 * MAX_PSI
+        + EVENT_BYTES * MAX_EVENTS;
+
+    /// Writes the state into `out` in its saved form: [`SAVED_MAGIC`], then the phase,
+    /// the values, the stages, the window history, the ψs and the events, little-endian
+    /// (docs/trace-format.md). A flight recorder keeps it as the start of a recording;
+    /// [`Detector::restore`](crate::Detector::restore) reads it back.
+    pub fn save(&self, out: &mut [u8; State::SAVED_BYTES]) {
+        let mut w = Cursor { buf: out, at: 0 };
+        w.put(SAVED_MAGIC);
+        w.put([self.phase]);
+        for v in &self.values {
+            w.put(v.to_le_bytes());
+        }
+        for st in &self.stages {
+            w.put(st.save());
+        }
+        for e in &self.ring {
+            w.put(e.to_le_bytes());
+        }
+        for p in &self.psi {
+            w.put(p.to_le_bytes());
+        }
+        for e in &self.events {
+            w.put([u8::from(e.rising)]);
+            w.put(e.onset.to_le_bytes());
+            for l in &e.levels {
+                w.put([u8::from(l.up)]);
+                w.put(l.run.to_le_bytes());
+            }
+        }
+    }
+
+    /// Reads a saved state's fields, checking only their own ranges (flags 0 or 1, ψ at
+    /// most 1); the detector's checks are [`Detector::restore`](crate::Detector::restore)'s.
+    pub(crate) fn read_saved(bytes: &[u8]) -> Result<State, StateError> {
+        if bytes.len() != State::SAVED_BYTES {
+            return Err(StateError::Length(bytes.len()));
+        }
+        let mut r = Reading { bytes };
+        if r.take::<4>() != SAVED_MAGIC {
+            return Err(StateError::Magic);
+        }
+        let flag = |b: u8| match b {
+            0 => Ok(false),
+            1 => Ok(true),
+            _ => Err(StateError::Flag),
+        };
+        let phase = r.take::<1>()[0];
+        let mut values = [0i32; MAX_SLOTS];
+        for v in &mut values {
+            *v = i32::from_le_bytes(r.take());
+        }
+        let mut stages = [StageState::default(); MAX_FEATURES];
+        for st in &mut stages {
+            *st = StageState::restore(r.take()).ok_or(StateError::Flag)?;
+        }
+        let mut ring = [0u64; WINDOW_POOL];
+        for e in &mut ring {
+            *e = u64::from_le_bytes(r.take());
+        }
+        let mut psi = [0u16; MAX_PSI];
+        for (index, p) in psi.iter_mut().enumerate() {
+            *p = u16::from_le_bytes(r.take());
+            if u32::from(*p) > ONE {
+                return Err(StateError::Confidence(index));
+            }
+        }
+        let mut events = [EventState::default(); MAX_EVENTS];
+        for e in &mut events {
+            e.rising = flag(r.take::<1>()[0])?;
+            e.onset = Tick::from_le_bytes(r.take());
+            for l in &mut e.levels {
+                l.up = flag(r.take::<1>()[0])?;
+                l.run = u16::from_le_bytes(r.take());
+            }
+        }
+        Ok(State {
+            values,
+            stages,
+            ring,
+            psi,
+            events,
+            phase,
+        })
+    }
+}
+
+/// The first bytes of a saved state: its format, version 1.
+pub const SAVED_MAGIC: [u8; 4] = *b"FTS1";
+
+/// Bytes of an event's saved state: rising, onset, and each level's up and run.
+const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2);
+
+/// Writes a saved state front to back (the buffer is exactly as long as what is written).
+struct Cursor<'b> {
+    buf: &'b mut [u8],
+    at: usize,
+}
+
+impl Cursor<'_> {
+    fn put<const N: usize>(&mut self, bytes: [u8; N]) {
+        if let Some(dst) = self.buf.get_mut(self.at..self.at + N) {
+            dst.copy_from_slice(&bytes);
+        }
+        self.at += N;
+    }
+}
+
+/// Reads a saved state front to back (its length checked first, so every read has its
+/// bytes).
+struct Reading<'b> {
+    bytes: &'b [u8],
+}
+
+impl Reading<'_> {
+    fn take<const N: usize>(&mut self) -> [u8; N] {
+        match self.bytes.split_first_chunk::<N>() {
+            Some((head, rest)) => {
+                self.bytes = rest;
+                *head
+            }
+            None => [0; N],
+        }
+    }
+}
+
+/// Why saved bytes are not a state a detector can run on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum StateError {
+    /// Not [`State::SAVED_BYTES`] long (the length found).
+    Length(usize),
+    /// It does not start with [`SAVED_MAGIC`].
+    Magic,
+    /// A flag byte is neither 0 nor 1.
+    Flag,
+    /// The phase is not one of the detector's (the phase, the detector's phase count).
+    Phase(u8, usize),
+    /// ψ number `.0` is above 1.
+    Confidence(usize),
+    /// Feature number `.0`'s running state is one its stage cannot reach (another
+    /// detector's state, or a corrupted one).
+    Feature(usize),
+}
+
+impl core::fmt::Display for StateError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            StateError::Length(n) => write!(
+                f,
+                "a saved detector state is {} bytes, not {n}",
+                State::SAVED_BYTES
+            ),
+            StateError::Magic => {
+                f.write_str("not a saved detector state (it does not start with `FTS1`)")
+            }
+            StateError::Flag => f.write_str("a flag of the saved state is neither 0 nor 1"),
+            StateError::Phase(p, n) => {
+                write!(
+                    f,
+                    "the saved state is in phase {p}, but the detector has {n} phases"
+                )
+            }
+            StateError::Confidence(i) => write!(f, "confidence {i} of the saved state is above 1"),
+            StateError::Feature(i) => write!(
+                f,
+                "feature {i}'s saved running state is out of its stage's range (the state of another detector?)"
+            ),
+        }
+    }
 }
 
 /// A context product's starting value, 1 in Q15.

@@ -20,6 +20,9 @@
 //! | [`Request::LastCrash`] | 0x40 | — | 0 (none), or 1, the [`CrashKind`], the program counter (`u32`), the message (length, UTF-8) |
 //! | [`Request::ReadKey`] | 0x20 | key (`u16`) | value (4 bytes) |
 //! | [`Request::WriteKey`] | 0x21 | key (`u16`), value (4 bytes) | — |
+//! | [`Request::RecordingInfo`] | 0x50 | — | [`RecordingInfo`] |
+//! | [`Request::RecordingRead`] | 0x51 | offset (`u32`) | offset (`u32`), up to [`PAGE_MAX`] bytes of the readout |
+//! | [`Request::RecordingRearm`] | 0x52 | — | — |
 //!
 //! Numbers are little-endian. An error response's body is a short UTF-8 text naming what
 //! was wrong (a channel, a value, a section of the image).
@@ -255,6 +258,44 @@ impl core::fmt::Display for Key {
     }
 }
 
+/// Bytes of a flight recording one [`Request::RecordingRead`] returns at most: what a
+/// single-frame response carries beside its code, status, offset and CRC-32.
+pub const PAGE_MAX: usize = crate::transfer::SINGLE_MAX - FRAMING - 1 - 4;
+
+/// What froze a flight recording.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum RecordingCause {
+    /// The event of this index (in the detector's configuration) was confirmed.
+    Confirmed(u8),
+    /// These channels went bad (bit `i` for the detector's channel `i`).
+    Fault(u16),
+}
+
+/// The flight recorder, as [`Request::RecordingInfo`] reports it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct RecordingInfo {
+    /// Recording stopped, the readout ready; else still recording (or nothing yet).
+    pub frozen: bool,
+    /// What triggered the freeze (set from the trigger on, before the freeze).
+    pub cause: Option<RecordingCause>,
+    /// The trigger's tick (0 without one).
+    pub trigger_tick: u32,
+    /// The tick of the first row.
+    pub first_tick: u32,
+    /// Rows held, one per tick from `first_tick` on.
+    pub rows: u32,
+    /// The detector's channel count: each row's samples.
+    pub channels: u8,
+    /// The detector rate, Hz.
+    pub rate_hz: u32,
+    /// The CRC-32 of the detector's image.
+    pub detector_crc: u32,
+    /// Bytes of the readout: the saved state, then the rows.
+    pub bytes: u32,
+}
+
 /// What the fingertip runs, as [`Request::Identify`] reports it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -335,6 +376,12 @@ pub enum Request<'a> {
     ReadKey(Key),
     /// Write a key of the store.
     WriteKey(Key, [u8; 4]),
+    /// What the flight recorder holds.
+    RecordingInfo,
+    /// A page of a frozen recording's readout, from this byte on.
+    RecordingRead(u32),
+    /// Drop the recording held and record again.
+    RecordingRearm,
 }
 
 /// Why a request was not carried out: the status byte of a response.
@@ -425,6 +472,15 @@ pub enum Response {
     Done,
     /// To [`Request::LastCrash`]: the crash found at the last boot, if any.
     Crash(Option<CrashReport>),
+    /// To [`Request::RecordingInfo`].
+    Recording(RecordingInfo),
+    /// To [`Request::RecordingRead`]: the bytes from `offset` on (none past the end).
+    Page {
+        /// Where they start in the readout.
+        offset: u32,
+        /// Up to [`PAGE_MAX`] bytes.
+        data: heapless::Vec<u8, PAGE_MAX>,
+    },
     /// The request failed.
     Error(ErrorCode, Detail),
 }
@@ -556,6 +612,9 @@ const SAVE: u8 = 0x12;
 const ENTER_SERVICE: u8 = 0x30;
 const LEAVE_SERVICE: u8 = 0x31;
 const LAST_CRASH: u8 = 0x40;
+const RECORDING_INFO: u8 = 0x50;
+const RECORDING_READ: u8 = 0x51;
+const RECORDING_REARM: u8 = 0x52;
 /// Bit 7 marks a response.
 const RESPONSE: u8 = 0x80;
 
@@ -571,6 +630,9 @@ impl<'a> Request<'a> {
             Request::EnterService => ENTER_SERVICE,
             Request::LeaveService => LEAVE_SERVICE,
             Request::LastCrash => LAST_CRASH,
+            Request::RecordingInfo => RECORDING_INFO,
+            Request::RecordingRead(_) => RECORDING_READ,
+            Request::RecordingRearm => RECORDING_REARM,
         }
     }
 
@@ -582,7 +644,10 @@ impl<'a> Request<'a> {
             | Request::Activate
             | Request::EnterService
             | Request::LeaveService
-            | Request::LastCrash => {}
+            | Request::LastCrash
+            | Request::RecordingInfo
+            | Request::RecordingRearm => {}
+            Request::RecordingRead(offset) => w.put(&offset.to_le_bytes()),
             Request::Load { name, image } | Request::Save { name, image } => {
                 if name.len() > NAME_MAX {
                     return Err(ServiceError::Malformed);
@@ -611,6 +676,9 @@ impl<'a> Request<'a> {
             ENTER_SERVICE => Request::EnterService,
             LEAVE_SERVICE => Request::LeaveService,
             LAST_CRASH => Request::LastCrash,
+            RECORDING_INFO => Request::RecordingInfo,
+            RECORDING_READ => Request::RecordingRead(b.u32()?),
+            RECORDING_REARM => Request::RecordingRearm,
             LOAD | SAVE => {
                 let n = usize::from(b.u8()?);
                 if n > NAME_MAX {
@@ -684,6 +752,26 @@ impl Response {
                         w.put(&[c.message.len() as u8]);
                         w.put(c.message.as_bytes());
                     }
+                    Response::Recording(r) => {
+                        let (kind, value) = match r.cause {
+                            None => (0u8, 0u32),
+                            Some(RecordingCause::Confirmed(e)) => (1, u32::from(e)),
+                            Some(RecordingCause::Fault(m)) => (2, u32::from(m)),
+                        };
+                        w.put(&[u8::from(r.frozen), kind]);
+                        w.put(&value.to_le_bytes());
+                        w.put(&r.trigger_tick.to_le_bytes());
+                        w.put(&r.first_tick.to_le_bytes());
+                        w.put(&r.rows.to_le_bytes());
+                        w.put(&[r.channels]);
+                        w.put(&r.rate_hz.to_le_bytes());
+                        w.put(&r.detector_crc.to_le_bytes());
+                        w.put(&r.bytes.to_le_bytes());
+                    }
+                    Response::Page { offset, data } => {
+                        w.put(&offset.to_le_bytes());
+                        w.put(data);
+                    }
                     Response::Written | Response::Done | Response::Error(..) => {}
                 }
             }
@@ -734,7 +822,45 @@ impl Response {
                 slot: b.u8()?,
                 stall_ms: b.u16()?,
             },
-            ENTER_SERVICE | LEAVE_SERVICE => Response::Done,
+            ENTER_SERVICE | LEAVE_SERVICE | RECORDING_REARM => Response::Done,
+            RECORDING_INFO => {
+                let frozen = match b.u8()? {
+                    0 => false,
+                    1 => true,
+                    _ => return Err(ServiceError::Malformed),
+                };
+                let kind = b.u8()?;
+                let value = b.u32()?;
+                let cause = match kind {
+                    0 => None,
+                    1 => Some(RecordingCause::Confirmed(
+                        u8::try_from(value).map_err(|_| ServiceError::Malformed)?,
+                    )),
+                    2 => Some(RecordingCause::Fault(
+                        u16::try_from(value).map_err(|_| ServiceError::Malformed)?,
+                    )),
+                    _ => return Err(ServiceError::Malformed),
+                };
+                Response::Recording(RecordingInfo {
+                    frozen,
+                    cause,
+                    trigger_tick: b.u32()?,
+                    first_tick: b.u32()?,
+                    rows: b.u32()?,
+                    channels: b.u8()?,
+                    rate_hz: b.u32()?,
+                    detector_crc: b.u32()?,
+                    bytes: b.u32()?,
+                })
+            }
+            RECORDING_READ => {
+                let offset = b.u32()?;
+                let rest = b.take(b.0.len())?;
+                Response::Page {
+                    offset,
+                    data: heapless::Vec::from_slice(rest).map_err(|_| ServiceError::Malformed)?,
+                }
+            }
             LAST_CRASH => Response::Crash(match b.u8()? {
                 0 => None,
                 1 => {
@@ -806,6 +932,9 @@ mod tests {
             image: &[1, 2, 3, 4, 5],
         });
         round_trip(Request::ReadKey(Key::NodeId));
+        round_trip(Request::RecordingInfo);
+        round_trip(Request::RecordingRead(0x0001_2345));
+        round_trip(Request::RecordingRearm);
         round_trip(Request::WriteKey(
             Key::parse("skin_accel.drift").unwrap(),
             1.5f32.to_le_bytes(),
@@ -860,6 +989,46 @@ mod tests {
                 Response::Crash(Some(CrashReport::new(CrashKind::HardFault, 0x0800_1234))),
             ),
             (LEAVE_SERVICE, Response::Done),
+            (RECORDING_REARM, Response::Done),
+            (
+                RECORDING_INFO,
+                Response::Recording(RecordingInfo::default()),
+            ),
+            (
+                RECORDING_INFO,
+                Response::Recording(RecordingInfo {
+                    frozen: true,
+                    cause: Some(RecordingCause::Confirmed(2)),
+                    trigger_tick: u32::MAX,
+                    first_tick: 7,
+                    rows: 750,
+                    channels: 10,
+                    rate_hz: 5000,
+                    detector_crc: 0xDEAD_BEEF,
+                    bytes: 35_255,
+                }),
+            ),
+            (
+                RECORDING_INFO,
+                Response::Recording(RecordingInfo {
+                    cause: Some(RecordingCause::Fault(0x8001)),
+                    ..RecordingInfo::default()
+                }),
+            ),
+            (
+                RECORDING_READ,
+                Response::Page {
+                    offset: 3005,
+                    data: heapless::Vec::from_slice(&[0xA5; PAGE_MAX]).unwrap(),
+                },
+            ),
+            (
+                RECORDING_READ,
+                Response::Page {
+                    offset: 99,
+                    data: heapless::Vec::new(),
+                },
+            ),
             (
                 LOAD,
                 Response::Error(
@@ -879,6 +1048,24 @@ mod tests {
             buf[n / 2] ^= 0x10;
             assert!(Response::decode(code, &buf[..n]).is_err());
         }
+    }
+
+    #[test]
+    fn a_full_page_and_a_recording_info_fit_a_single_frame() {
+        let mut buf = [0u8; 256];
+        let page = Response::Page {
+            offset: u32::MAX,
+            data: heapless::Vec::from_slice(&[0; PAGE_MAX]).unwrap(),
+        };
+        assert_eq!(
+            page.encode(RECORDING_READ, &mut buf).unwrap(),
+            crate::transfer::SINGLE_MAX
+        );
+        let info = Response::Recording(RecordingInfo {
+            cause: Some(RecordingCause::Confirmed(0)),
+            ..RecordingInfo::default()
+        });
+        assert!(info.encode(RECORDING_INFO, &mut buf).unwrap() <= crate::transfer::SINGLE_MAX);
     }
 
     #[test]

@@ -165,6 +165,29 @@ enum Command {
         /// Keys to read (`KEY`) or write (`KEY=VALUE`); every key when none is given.
         keys: Vec<String>,
     },
+    /// Read a fingertip's flight recording out (the detector's inputs tick by tick, at
+    /// least 50 ms before and 50 ms after the confirmation or fault that froze it) and
+    /// write it as a trace that `fingertip replay` runs as the fingertip did: the same
+    /// confirmations at the same ticks, checked here before it is written. Then re-arms
+    /// the recorder (unless --keep).
+    FetchRecording {
+        /// The configuration the fingertip runs (TOML): names the columns; its image's
+        /// CRC-32 must be the recording's.
+        #[arg(long)]
+        config: PathBuf,
+        /// The trace to write.
+        #[arg(long)]
+        out: PathBuf,
+        /// The fingertip's node id (0..=14).
+        #[arg(long)]
+        node: u8,
+        /// The CAN interface, e.g. can0 or vcan0.
+        #[arg(long, default_value = "can0")]
+        iface: String,
+        /// Leave the recording frozen in the fingertip (to read it again).
+        #[arg(long)]
+        keep: bool,
+    },
     /// What a fingertip runs: firmware version and build, the detector in service (its
     /// CRC-32 and name) and any waiting for its phase boundary.
     Info {
@@ -418,6 +441,13 @@ fn run(cli: Cli) -> Result<()> {
         } => load_cmd(&config, node, &iface, activate, save),
         Command::Calibrate { node, iface, keys } => calibrate_cmd(node, &iface, &keys),
         Command::Info { node, iface } => info_cmd(node, &iface),
+        Command::FetchRecording {
+            config,
+            out,
+            node,
+            iface,
+            keep,
+        } => fetch_recording_cmd(&config, &out, node, &iface, keep),
         Command::Busload {
             fingertips,
             decimation,
@@ -1261,6 +1291,50 @@ fn calibrate_cmd(node: u8, iface: &str, keys: &[String]) -> Result<()> {
             Response::Error(code, text) => return Err(refused(node, code, &text)),
             other => bail!("node {}: unexpected answer {other:?}", node.get()),
         }
+    }
+    Ok(())
+}
+
+fn fetch_recording_cmd(config: &Path, out: &Path, node: u8, iface: &str, keep: bool) -> Result<()> {
+    use fingertip::can_tools::recording;
+    use fingertip_can::service::{Request, crc32};
+    let node = node_id(node)?;
+    let parsed = detector_build::load(config)?;
+    let crc = crc32(
+        &detector_build::compile(&parsed)
+            .with_context(|| config.display().to_string())?
+            .image(),
+    );
+    let detector = detector_build::build(&parsed).with_context(|| config.display().to_string())?;
+    let mut client = service_client(node, iface)?;
+    let rec = recording::fetch(&mut client).with_context(|| format!("node {}", node.get()))?;
+    let name = out.display().to_string();
+    let trace = rec.to_trace(&detector, crc, &name)?;
+    let decisions = rec.check_replay(&detector, &trace)?;
+    trace.write(out)?;
+    let info = &rec.info;
+    let rate = f64::from(info.rate_hz);
+    println!(
+        "node {}: {} ticks from tick {} ({:.1} ms), frozen {:.1} ms after tick {} ({}), written to {name}",
+        node.get(),
+        info.rows,
+        info.first_tick,
+        f64::from(info.rows) / rate * 1e3,
+        f64::from(
+            info.first_tick
+                .wrapping_add(info.rows)
+                .wrapping_sub(info.trigger_tick)
+        ) / rate
+            * 1e3,
+        info.trigger_tick,
+        trace.meta("trigger").unwrap_or("?"),
+    );
+    let confirmed = decisions.iter().filter(|d| d.is_confirm()).count();
+    println!(
+        "replayed on the PC from the fingertip's state: {confirmed} confirmation(s), the trigger's at its tick"
+    );
+    if !keep {
+        ask(&mut client, node, &Request::RecordingRearm)?;
     }
     Ok(())
 }

@@ -83,6 +83,63 @@ pub enum ReplayError {
         /// The configured events, comma-separated.
         have: String,
     },
+    /// A recording's saved state (its `state` metadata) is not one this detector runs on.
+    #[error(
+        "{trace}: metadata 'state': {reason} (replay a flight recording with the configuration the fingertip ran)"
+    )]
+    SavedState {
+        /// The trace's name.
+        trace: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A recording's `first_tick` metadata is not a tick.
+    #[error("{trace}: metadata 'first_tick': `{value}` is not a tick (a whole number below 2^32)")]
+    FirstTick {
+        /// The trace's name.
+        trace: String,
+        /// The value found.
+        value: String,
+    },
+    /// A `withheld` cell is not a set of the configuration's channels.
+    #[error(
+        "{trace}: line {line}, column 'withheld': `{value}` is not a set of the configuration's {channels} channels (a whole number below 2^{channels})"
+    )]
+    Withheld {
+        /// The trace's name.
+        trace: String,
+        /// The row's file line.
+        line: usize,
+        /// The cell.
+        value: f64,
+        /// The configuration's channel count.
+        channels: usize,
+    },
+}
+
+/// A flight recording's metadata: the detector's state before its first row, hex
+/// ([`State::save`]'s bytes).
+pub const STATE_KEY: &str = "state";
+/// A flight recording's metadata: the fingertip's tick at its first row.
+pub const FIRST_TICK_KEY: &str = "first_tick";
+
+/// The column of a flight recording that names the channels withheld at each tick (bit
+/// `i` for the configuration's channel `i`): docs/trace-format.md.
+pub const WITHHELD_COLUMN: &str = "withheld";
+
+/// The channels a `withheld` cell names, checked against the detector's channel count.
+fn withheld(detector: &Detector, trace: &str, line: usize, v: f64) -> Result<u32, ReplayError> {
+    let channels = detector.channels().len();
+    if v.fract() == 0.0 && v >= 0.0 && v < f64::from(1u32 << channels.min(31)) {
+        Ok(v as u32)
+    } else {
+        Err(ReplayError::Withheld {
+            trace: trace.to_string(),
+            line,
+            value: v,
+            channels,
+        })
+    }
 }
 
 /// How far a trace's rate may be from the detector's, as a fraction of the detector's: a
@@ -255,6 +312,8 @@ fn replay_with(
 ) -> Result<Vec<DecisionRecord>, ReplayError> {
     let columns = channel_columns(detector, trace)?;
     check_rate(detector, trace.name(), trace.rate_hz())?;
+    ticker.start_from(detector, trace.name(), trace.metadata())?;
+    let withheld_column = trace.column(WITHHELD_COLUMN);
     let mut rules = RowRules::new(detector, trace.name());
     let t = trace.time();
     for row in 0..t.len() {
@@ -266,9 +325,14 @@ fn replay_with(
         if let Some(label) = trace.truth().and_then(|l| l.get(row)) {
             rules.truth(label, t[row], line)?;
         }
+        let faults = match withheld_column.and_then(|c| c.get(row)) {
+            Some(&v) => withheld(detector, trace.name(), line, v)?,
+            None => 0,
+        };
         ticker.tick(
             detector,
             row,
+            faults,
             |k| columns.get(k).and_then(|c| c.get(row)).copied(),
             |tick| t.get(tick as usize).copied().unwrap_or(f64::NAN),
         );
@@ -359,6 +423,8 @@ pub fn replay_stream_each<R: std::io::BufRead + Send>(
 struct Part<'d> {
     detector: &'d Detector,
     columns: Vec<usize>,
+    /// The `withheld` column's place among the trace's channels, if it has one.
+    withheld: Option<usize>,
     rules: RowRules<'d>,
     ticker: Ticker,
     period: f64,
@@ -375,11 +441,17 @@ struct Read {
 impl<'d> Part<'d> {
     fn new(detector: &'d Detector, reader: &ReadAhead) -> Result<Part<'d>, StreamError> {
         let name = reader.name();
+        let mut ticker = Ticker::new(detector);
+        ticker.start_from(detector, name, reader.metadata())?;
         Ok(Part {
             detector,
             columns: channel_positions(detector, name, reader.channel_names())?,
+            withheld: reader
+                .channel_names()
+                .iter()
+                .position(|n| n == WITHHELD_COLUMN),
             rules: RowRules::new(detector, name),
-            ticker: Ticker::new(detector),
+            ticker,
             period: 1.0 / f64::from(detector.rate_hz()),
         })
     }
@@ -435,9 +507,14 @@ fn replay_rows(
                 part.rules.truth(label, r.t, r.line)?;
             }
             let (values, columns) = (r.values, &part.columns);
+            let faults = match part.withheld.and_then(|c| values.get(c)) {
+                Some(&v) => withheld(part.detector, &name, r.line, v)?,
+                None => 0,
+            };
             part.ticker.tick(
                 part.detector,
                 row,
+                faults,
                 |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
                 |tick| t0 + f64::from(tick) * period,
             );
@@ -511,6 +588,8 @@ struct Ticker {
     /// The detector is the default one: its generated tick runs, bit for bit the
     /// interpreter's.
     generated: bool,
+    /// The tick of the first row (a flight recording's; 0 otherwise).
+    first: Tick,
 }
 
 impl Ticker {
@@ -521,18 +600,58 @@ impl Ticker {
             out: Output::default(),
             records: Vec::new(),
             generated: crate::builtin::is_default(detector),
+            first: 0,
         }
     }
 
-    /// One tick on row `row`: channel `k`'s SI value from `sample(k)` (0 when missing);
-    /// levels raised are recorded with times from `time_of(tick)`.
+    /// Starts where a flight recording started, when the trace is one: from its saved
+    /// state (`state` metadata, hex) at its first tick (`first_tick`), as the fingertip
+    /// did; otherwise from a fresh state at tick 0.
+    fn start_from(
+        &mut self,
+        detector: &Detector,
+        trace: &str,
+        metadata: &[(String, String)],
+    ) -> Result<(), ReplayError> {
+        let meta = |key: &str| metadata.iter().find(|(k, _)| k == key).map(|(_, v)| v);
+        if let Some(hex_state) = meta(STATE_KEY) {
+            let saved_state = |reason: String| ReplayError::SavedState {
+                trace: trace.to_string(),
+                reason,
+            };
+            let bytes = hex::decode(hex_state)
+                .map_err(|e| saved_state(format!("not hexadecimal bytes ({e})")))?;
+            self.state = detector.restore(&bytes).map_err(|e| {
+                saved_state(match e {
+                    detector_core::StateError::Feature(k) => format!(
+                        "{e}: feature `{}`",
+                        detector.features().get(k).map_or("?", |n| n.as_str())
+                    ),
+                    e => e.to_string(),
+                })
+            })?;
+        }
+        if let Some(v) = meta(FIRST_TICK_KEY) {
+            self.first = v.parse().map_err(|_| ReplayError::FirstTick {
+                trace: trace.to_string(),
+                value: v.clone(),
+            })?;
+        }
+        Ok(())
+    }
+
+    /// One tick on row `row` with the channels `faults` withheld: channel `k`'s SI value
+    /// from `sample(k)` (0 when missing); levels raised are recorded with times from
+    /// `time_of(row of the tick)`.
     fn tick(
         &mut self,
         detector: &Detector,
         row: usize,
+        faults: u32,
         sample: impl Fn(usize) -> Option<f64>,
         time_of: impl Fn(Tick) -> f64,
     ) {
+        self.inputs.faults = faults;
         for (k, s) in self
             .inputs
             .samples
@@ -547,7 +666,9 @@ impl Ticker {
         } else {
             detector
         };
-        tick.tick_into(&mut self.state, row as Tick, &self.inputs, &mut self.out);
+        let now = self.first.wrapping_add(row as Tick);
+        tick.tick_into(&mut self.state, now, &self.inputs, &mut self.out);
+        let first = self.first;
         for d in &self.out.decisions {
             self.records.push(DecisionRecord {
                 event: detector
@@ -557,8 +678,8 @@ impl Ticker {
                     .unwrap_or_default(),
                 level: d.level.name(),
                 confidence: d.confidence.to_f64(),
-                onset_s: time_of(d.onset),
-                t_s: time_of(d.tick),
+                onset_s: time_of(d.onset.wrapping_sub(first)),
+                t_s: time_of(d.tick.wrapping_sub(first)),
             });
         }
     }

@@ -1066,6 +1066,7 @@ pub struct ReadAhead {
     truth: String,
     name: String,
     channel_names: Vec<String>,
+    metadata: Vec<(String, String)>,
     header_line: usize,
     has_phase: bool,
     has_truth: bool,
@@ -1144,6 +1145,7 @@ impl ReadAhead {
             truth: String::new(),
             name: reader.name().to_string(),
             channel_names: reader.channel_names().to_vec(),
+            metadata: reader.metadata().to_vec(),
             header_line: reader.header_line(),
             has_phase: reader.has_phase(),
             has_truth: reader.has_truth(),
@@ -1166,6 +1168,11 @@ impl ReadAhead {
             }
         });
         ahead
+    }
+
+    /// The `# key: value` comments before the header.
+    pub fn metadata(&self) -> &[(String, String)] {
+        &self.metadata
     }
 
     /// The next row, checked; `None` after the last one.

@@ -23,7 +23,9 @@
 //! The board's detector task only adds the cycle counter and the queues around
 //! [`TickRunner::step`].
 
-use detector_core::{Detector, DetectorTick, ImageError, Inputs, Output, State, Tick};
+use detector_core::{
+    Detector, DetectorTick, EventMask, ImageError, Inputs, Level, Output, State, Tick,
+};
 use fingertip_can::service::{DetectorName, Mode, NAME_MAX};
 use fingertip_can::{
     BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
@@ -32,6 +34,7 @@ use fingertip_can::{
 
 use crate::channel_set::ChannelSet;
 use crate::load::Staged;
+use crate::recorder::Ticked;
 use crate::sampling::AdcSample;
 use crate::shared::{DetectorHandle, RxShared};
 use crate::timing::{Lateness, TickTiming, budget_cycles, cycles_to_tenths_us};
@@ -333,6 +336,12 @@ pub struct Engine<'d, T: DetectorTick> {
     status: Status,
     applied_phase: Option<(u8, u8)>,
     inputs: Inputs,
+    /// Counts fresh starts of the detector's state (another detector, the service state
+    /// left): a flight recording is one run of one state.
+    generation: u32,
+    /// The last tick the detector ran, and the events it confirmed; `None` when the last
+    /// tick ran none (the service state).
+    last: Option<(Tick, EventMask)>,
 }
 
 impl<'d, T: DetectorTick> Engine<'d, T> {
@@ -400,6 +409,8 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
             activate: false,
             retired: None,
             service: false,
+            generation: 0,
+            last: None,
         })
     }
 
@@ -462,6 +473,7 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         if self.service && !on {
             self.state = self.detector.new_state();
             self.applied_phase = None;
+            self.generation = self.generation.wrapping_add(1);
         }
         self.service = on;
         self.status.faults.set(FaultFlags::SERVICE, on);
@@ -494,6 +506,7 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         self.retired = Some(old);
         self.tick = None;
         self.state = self.detector.new_state();
+        self.generation = self.generation.wrapping_add(1);
         self.map = ChannelMap::resolve(self.detector);
         self.status.config_checksum = s.crc;
         self.status.mode = Mode::Loaded;
@@ -523,9 +536,26 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         &self.state
     }
 
+    /// What the last tick gave the flight recorder: its inputs and the state after it,
+    /// or `None` when it ran no detector (the service state).
+    pub fn ticked(&self) -> Option<Ticked<'_>> {
+        let (now, confirmed) = self.last?;
+        Some(Ticked {
+            now,
+            rate_hz: u32::from(self.status.tick_rate_hz),
+            crc: self.status.config_checksum,
+            generation: self.generation,
+            channels: self.detector.channels().len(),
+            inputs: &self.inputs,
+            state: &self.state,
+            confirmed,
+        })
+    }
+
     /// One tick on the newest analog sample: its tick is the detector's `now`.
     pub fn tick(&mut self, sample: &AdcSample, rx: &RxShared, health: &Health) -> TickResult {
         let now = sample.tick;
+        self.last = None;
         let receiver = self.receiver;
         let status = &mut self.status;
         // Under the receive-state mutex: only the receiver's bookkeeping, no detector work.
@@ -600,6 +630,12 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
                 .detector
                 .tick_into(&mut self.state, now, &self.inputs, &mut output),
         }
+        let confirmed = output
+            .decisions
+            .iter()
+            .filter(|d| d.level == Level::Confirm)
+            .fold(0, |m: EventMask, d| m | 1 << (d.event.0 & 7));
+        self.last = Some((now, confirmed));
 
         report_health(&mut self.status, health, sample, self.tx.dropped());
         let frames = self

@@ -15,6 +15,7 @@ pub mod load;
 pub mod node_id;
 pub mod nvm;
 pub mod rail;
+pub mod recorder;
 pub mod reset;
 pub mod sampling;
 pub mod service_end;

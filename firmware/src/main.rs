@@ -68,6 +68,7 @@ use firmware::engine::{BoardInfo, Service, TickRunner};
 use firmware::load::Loader;
 use firmware::node_id::{self, NodeIdError};
 use firmware::nvm::{BootImage, Nvm, SLOT_IMAGE_MAX};
+use firmware::recorder::RecorderCell;
 use firmware::sampling::{DMA_LEN, DMA_SCANS, FrontEnd, SCAN_LEN, ScanPicker, ScanProgress};
 use firmware::service_end::{Mailbox, Requests, ServiceEnd};
 use firmware::shared::{
@@ -156,6 +157,8 @@ type ServiceFrame = ([u8; 64], u8);
 static SPARE: ConstStaticCell<Detector> = ConstStaticCell::new(Detector::empty());
 /// Where the service task and the detector task meet.
 static MAILBOX: Mailbox<'static> = Mailbox::new();
+/// The flight recorder: written by the detector task, read out by the service task.
+static RECORDER: RecorderCell = RecorderCell::new();
 /// The service channel's end (its reassembly buffer is 8 KiB): in a static, made at boot
 /// (a `const` one would be 8 KiB of initialized data in flash).
 static SERVICE_END: StaticCell<ServiceEnd> = StaticCell::new();
@@ -629,8 +632,13 @@ fn setup() -> Board {
         can_rx: can_rx_half,
         can_properties: properties,
         watchdog,
-        requests: Requests::new(Loader::new(SPARE.take(), rate_hz as f32), &MAILBOX, nvm)
-            .with_last_crash(crashed),
+        requests: Requests::new(
+            Loader::new(SPARE.take(), rate_hz as f32),
+            &MAILBOX,
+            &RECORDER,
+            nvm,
+        )
+        .with_last_crash(crashed),
         node,
     }
 }
@@ -744,6 +752,9 @@ async fn detector_task(
                 pushed
             })
         });
+
+        // The flight recorder, once the frames are on their way.
+        RECORDER.record(service);
 
         // A detector put in service may have another phase count: the receive task's
         // receiver follows.

@@ -26,7 +26,7 @@ use detector_core::DetectorTick;
 use embassy_sync::blocking_mutex::Mutex;
 use embedded_storage_async::nor_flash::NorFlash;
 use fingertip_can::service::{
-    CrashReport, DetectorName, ErrorCode, Identity, Key, Mode, Request, Response, detail,
+    CrashReport, DetectorName, ErrorCode, Identity, Key, Mode, PAGE_MAX, Request, Response, detail,
 };
 use fingertip_can::transfer::{MAX_MESSAGE, Payload, Reassembler, Received, SINGLE_MAX, Sender};
 
@@ -34,6 +34,7 @@ use crate::calib::{Calibration, CalibrationError};
 use crate::engine::{Engine, Service};
 use crate::load::{LoadError, Loader, Staged};
 use crate::nvm::Nvm;
+use crate::recorder::RecorderCell;
 use crate::shared::RawMutex;
 use crate::version::VERSION;
 
@@ -141,6 +142,7 @@ impl<'d> Inner<'d> {
 pub struct Requests<'m, 'd, F> {
     loader: Loader<'d>,
     mailbox: &'m Mailbox<'d>,
+    recorder: &'m RecorderCell,
     nvm: Nvm<F>,
     last_crash: Option<CrashReport>,
 }
@@ -185,11 +187,17 @@ fn check_key(key: Key, value: [u8; 4]) -> Result<(), Response> {
 
 impl<'m, 'd, F: NorFlash> Requests<'m, 'd, F> {
     /// Requests served with `loader`'s spare detector, meeting the detector task in
-    /// `mailbox`, keeping what must last in `nvm`.
-    pub fn new(loader: Loader<'d>, mailbox: &'m Mailbox<'d>, nvm: Nvm<F>) -> Requests<'m, 'd, F> {
+    /// `mailbox`, keeping what must last in `nvm`, reading out the flight `recorder`.
+    pub fn new(
+        loader: Loader<'d>,
+        mailbox: &'m Mailbox<'d>,
+        recorder: &'m RecorderCell,
+        nvm: Nvm<F>,
+    ) -> Requests<'m, 'd, F> {
         Requests {
             loader,
             mailbox,
+            recorder,
             nvm,
             last_crash: None,
         }
@@ -319,6 +327,27 @@ impl<'m, 'd, F: NorFlash> Requests<'m, 'd, F> {
                 Response::Done
             }
             Request::LastCrash => Response::Crash(self.last_crash.clone()),
+            Request::RecordingInfo => Response::Recording(self.recorder.with(|r| r.info())),
+            Request::RecordingRead(offset) => {
+                let mut page = [0u8; PAGE_MAX];
+                match self.recorder.with(|r| r.read(offset, &mut page)) {
+                    Some(n) => Response::Page {
+                        offset,
+                        data: heapless::Vec::from_slice(page.get(..n).unwrap_or(&[]))
+                            .unwrap_or_default(),
+                    },
+                    None => {
+                        return Err(error(
+                            ErrorCode::Busy,
+                            format_args!("the recording is not frozen yet"),
+                        ));
+                    }
+                }
+            }
+            Request::RecordingRearm => {
+                self.recorder.with(|r| r.rearm());
+                Response::Done
+            }
             Request::ReadKey(k) => match self.nvm.read_key(k.raw()).await {
                 Ok(Some(v)) => Response::Value(v),
                 Ok(None) => {

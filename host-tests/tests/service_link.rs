@@ -21,17 +21,20 @@ use std::collections::VecDeque;
 // The firmware's mutexes take critical sections: std's implementation on the PC.
 use critical_section as _;
 
-use detector_core::Detector;
+use detector_core::{Confidence, Decision, Detector, MAX_EVENTS, Signal};
 use embassy_futures::block_on;
 use fingertip::can_tools::busload::fd_frame_bits;
 use fingertip::can_tools::service::{Client, Link};
 use fingertip_can::service::{ErrorCode, Key, Mode, Request, Response, crc32};
-use fingertip_can::{BusFormat, NodeId, NodeIdSource, ResetReason};
+use fingertip_can::{
+    BusFormat, ContextGroup, ContextMsg, ContextSlot, Counter, NodeId, NodeIdSource, ResetReason,
+};
 use firmware::boot::{self, ApproachTick};
 use firmware::engine::{BoardInfo, Health, Service};
 use firmware::flash_sim::SimFlash;
 use firmware::load::Loader;
 use firmware::nvm::{BootImage, Nvm, Slot};
+use firmware::recorder::RecorderCell;
 use firmware::sampling::AdcSample;
 use firmware::service_end::{Mailbox, Requests, ServiceEnd};
 use firmware::shared::RxShared;
@@ -62,11 +65,52 @@ struct Fingertip {
     end: ServiceEnd,
     requests: Requests<'static, 'static, &'static mut SimFlash>,
     mailbox: &'static Mailbox<'static>,
+    recorder: &'static RecorderCell,
     rx: RxShared,
     tick: u32,
     next_tick_us: u64,
     /// The CRC-32 of the detector in service and of the one staged, at every tick.
     seen: Vec<(u32, Option<u32>)>,
+    /// What the sensors and the controller give, if not zeros: row `k` at tick `k`.
+    feed: Option<Feed>,
+    /// Each tick's event confidences and the levels raised (with their ticks and
+    /// onsets), by tick.
+    outputs: Vec<([Confidence; MAX_EVENTS], Vec<Decision>)>,
+}
+
+/// A simulated run fed to the fingertip as its sensors and the controller would: the
+/// calibrated analog channels every tick, the controller's context frame (raw, as sent)
+/// every fifth tick. The last row is held after the end.
+struct Feed {
+    rows: Vec<[f64; 10]>,
+}
+
+impl Feed {
+    /// The ten board channels of `traces`, one after the other.
+    fn new(traces: &[fingertip::trace::Trace]) -> Feed {
+        let names = [
+            "force_x",
+            "force_y",
+            "skin_accel",
+            "stress_rate",
+            "vel_des_x",
+            "vel_des_y",
+            "acc_des_x",
+            "acc_des_y",
+            "pos_err_x",
+            "pos_err_y",
+        ];
+        let mut rows = Vec::new();
+        for t in traces {
+            let columns = names.map(|n| t.column(n).unwrap());
+            rows.extend((0..t.len()).map(|k| columns.map(|c| c[k])));
+        }
+        Feed { rows }
+    }
+
+    fn row(&self, tick: u32) -> &[f64; 10] {
+        &self.rows[(tick as usize).min(self.rows.len() - 1)]
+    }
 }
 
 impl Fingertip {
@@ -83,31 +127,81 @@ impl Fingertip {
         let service = boot::start(active, boot::DETECTOR_IMAGE, ApproachTick, board);
         let mailbox: &'static Mailbox<'static> = Box::leak(Box::new(Mailbox::new()));
         let loader = Loader::new(spare, boot::RATE_HZ as f32);
+        let recorder: &'static RecorderCell = Box::leak(Box::new(RecorderCell::new()));
         Fingertip {
             service,
             end: ServiceEnd::new(),
             requests: Requests::new(
                 loader,
                 mailbox,
+                recorder,
                 Nvm::new(Box::leak(Box::new(SimFlash::new()))),
             ),
+            recorder,
             mailbox,
             rx: RxShared::new(),
             tick: 0,
             next_tick_us: 0,
             seen: Vec::new(),
+            feed: None,
+            outputs: Vec::new(),
         }
+    }
+
+    /// Fed from `feed`.
+    fn fed(feed: Feed) -> Fingertip {
+        Fingertip {
+            feed: Some(feed),
+            ..Fingertip::new()
+        }
+    }
+
+    /// The analog sample of the tick, and the controller's frame at its control cycles.
+    fn inputs(&self) -> AdcSample {
+        let mut sample = AdcSample {
+            tick: self.tick,
+            ..AdcSample::default()
+        };
+        let Some(feed) = &self.feed else {
+            return sample;
+        };
+        let row = feed.row(self.tick);
+        for (v, &si) in sample.values.iter_mut().zip(&row[..4]) {
+            *v = Signal::from_f64(si);
+        }
+        if self.tick.is_multiple_of(5) {
+            let raw = |v: f64, step: f64, max: i16| {
+                (v / step).round().clamp(-f64::from(max), f64::from(max)) as i16
+            };
+            let node = NodeId::new(3).unwrap();
+            let mut m = ContextMsg {
+                counter: Counter((self.tick / 5 % 256) as u8),
+                time_us: self.tick.wrapping_mul(200),
+                ..ContextMsg::default()
+            };
+            m.slots[ContextGroup::slot_of(node)] = Some(ContextSlot {
+                vel_des: [raw(row[4], 1e-4, 4095), raw(row[5], 1e-4, 4095)],
+                acc_des: [raw(row[6], 2e-3, 4095), raw(row[7], 2e-3, 4095)],
+                pos_err: [raw(row[8], 1e-6, 32767), raw(row[9], 1e-6, 32767)],
+            });
+            let frame = m.encode(ContextGroup::of(node)).unwrap();
+            let r = self.service.receiver().unwrap();
+            self.rx
+                .with(|s| r.receive(s, self.tick, frame.id().into(), frame.data()))
+                .unwrap();
+        }
+        sample
     }
 
     /// Runs the detector's ticks up to `now_us`.
     fn run_to(&mut self, now_us: u64) {
         while self.next_tick_us <= now_us {
             self.mailbox.serve(&mut self.service);
-            let sample = AdcSample {
-                tick: self.tick,
-                ..AdcSample::default()
-            };
-            self.service.tick(&sample, &self.rx, &Health::default());
+            let sample = self.inputs();
+            let r = self.service.tick(&sample, &self.rx, &Health::default());
+            self.recorder.record(&self.service);
+            self.outputs
+                .push((r.output.confidences, r.output.decisions.to_vec()));
             let Service::Running(e) = &self.service else {
                 panic!("the built-in detector runs")
             };
@@ -509,4 +603,131 @@ fn flash_writes_wait_for_the_service_state_and_outlast_a_reboot() {
     };
     assert_eq!((h.crc, h.name.as_str()), (crc32(&image), "fitted"));
     assert_eq!(block_on(nvm.read_key(key.raw())), Ok(Some(gain)));
+}
+
+/// A fingertip fed 0.4 s of free motion, then a hard contact at 8 cm/s: its recorder
+/// freezes 50 ms after the first confirmation, its run started long before.
+fn fed_fingertip() -> Fingertip {
+    use fingertip::sim::{Scenario, SimOptions, simulate};
+    let sim = |scenario: Scenario, duration_s: Option<f64>| {
+        let opts = SimOptions {
+            seed: 11,
+            randomize: true,
+            duration_s,
+            ..SimOptions::default()
+        };
+        simulate(&scenario, &opts).unwrap()
+    };
+    let free = sim(Scenario::FreeMotion, Some(0.4));
+    let contact = sim(Scenario::ContactHard8, None);
+    Fingertip::fed(Feed::new(&[free, contact]))
+}
+
+/// A bus whose fingertip has run through its feed and 100 ms more.
+fn after_the_feed(fingertip: Fingertip) -> Bus {
+    let ticks = fingertip.feed.as_ref().unwrap().rows.len() as u64 + 500;
+    let mut bus = Bus::new(fingertip);
+    bus.fingertip.run_to(ticks * TICK_US);
+    bus.now_us = (ticks * TICK_US) as f64;
+    bus
+}
+
+#[test]
+fn a_flight_recording_read_over_the_bus_replays_on_the_pc_as_the_chip_ran() {
+    use fingertip::can_tools::recording::{self, RecordingError};
+    use fingertip_can::service::{PAGE_MAX, RecordingCause};
+
+    let mut client = Client::new(after_the_feed(fed_fingertip()));
+    let (start_us, bus_before) = (client.link().now_us, client.link().bus_us);
+    let rec = recording::fetch(&mut client).unwrap();
+    let info = rec.info;
+    let bus = client.link();
+    println!(
+        "a flight recording of {} ticks ({} channels): {} bytes in {} pages, {:.1} ms of bus time, read in {:.1} ms",
+        info.rows,
+        info.channels,
+        info.bytes,
+        (info.bytes as usize).div_ceil(PAGE_MAX),
+        (bus.bus_us - bus_before) / 1000.0,
+        (bus.now_us - start_us) / 1000.0
+    );
+    assert!(info.frozen);
+    let Some(RecordingCause::Confirmed(event)) = info.cause else {
+        panic!("frozen by {:?}", info.cause)
+    };
+    assert!(
+        info.first_tick > 1000,
+        "the run started long before the recording"
+    );
+    assert!(
+        info.trigger_tick - info.first_tick >= 250,
+        "at least 50 ms before the confirmation"
+    );
+    assert_eq!(
+        info.first_tick + info.rows - 1 - info.trigger_tick,
+        250,
+        "50 ms after it"
+    );
+
+    // What the tool writes, read back.
+    let mut d = Detector::empty();
+    boot::load_detector(&mut d, boot::DETECTOR_IMAGE).unwrap();
+    let crc = crc32(boot::DETECTOR_IMAGE);
+    let text = rec.to_trace(&d, crc, "recording.csv").unwrap().to_csv();
+    let trace = fingertip::trace::Trace::parse(&text, "recording.csv").unwrap();
+    let decisions = rec.check_replay(&d, &trace).unwrap();
+    assert!(
+        decisions
+            .iter()
+            .any(|r| r.is_confirm() && r.event == d.events()[usize::from(event)].as_str())
+    );
+
+    // Tick by tick, the PC's confidences and confirmations are the chip's.
+    let chip = &client.link().fingertip.outputs;
+    let mut rows = 0;
+    fingertip::replay::replay(&d, &trace, |row, _, out| {
+        let tick = info.first_tick as usize + row;
+        assert_eq!(
+            (out.confidences, out.decisions.to_vec()),
+            chip[tick].clone(),
+            "tick {tick}"
+        );
+        rows += 1;
+    })
+    .unwrap();
+    assert_eq!(rows, info.rows);
+
+    // Another detector's configuration is refused, naming both CRCs.
+    let other = rec.to_trace(&d, crc ^ 1, "x").unwrap_err();
+    assert!(matches!(other, RecordingError::Detector { .. }), "{other}");
+    assert!(other.to_string().contains(&format!("{crc:#010x}")));
+
+    // Re-armed, the recorder records again and has nothing to read.
+    assert_eq!(
+        client.request(&Request::RecordingRearm).unwrap(),
+        Response::Done
+    );
+    let again = recording::fetch(&mut client).unwrap_err();
+    assert!(matches!(again, RecordingError::NotFrozen { .. }), "{again}");
+}
+
+#[test]
+fn a_page_lost_or_corrupted_on_the_bus_is_read_again() {
+    use fingertip::can_tools::recording;
+
+    let clean = recording::fetch(&mut Client::new(after_the_feed(fed_fingertip()))).unwrap();
+    for fault in [
+        Fault::Lose(9),
+        Fault::Corrupt(12, 200),
+        Fault::Corrupt(31, 17),
+    ] {
+        let mut bus = after_the_feed(fed_fingertip());
+        bus.fault = match fault {
+            Fault::Lose(n) => Fault::Lose(bus.frames + n),
+            Fault::Corrupt(n, bit) => Fault::Corrupt(bus.frames + n, bit),
+            Fault::None => Fault::None,
+        };
+        let mut client = Client::new(bus);
+        assert_eq!(recording::fetch(&mut client).unwrap(), clean, "{fault:?}");
+    }
 }

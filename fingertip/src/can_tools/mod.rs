@@ -11,6 +11,8 @@
 //!   CAN) and event-frame latency.
 //! - [`service`]: the tool's end of the service channel (load a detector, read and write
 //!   the store's keys), retried over a lossy bus.
+//! - [`recording`]: a fingertip's flight recording read out and written as a trace that
+//!   replays as the chip ran.
 //! - [`dbc`]: the published databases `fingertip-can/fingertip.dbc` (CAN FD) and
 //!   `fingertip-classic.dbc`, and their specification.
 //!
@@ -24,6 +26,7 @@ pub mod dbc;
 pub mod decode;
 #[cfg(target_os = "linux")]
 pub mod monitor;
+pub mod recording;
 pub mod service;
 
 pub use busload::{BusConfig, BusReport, analyse, write_report};

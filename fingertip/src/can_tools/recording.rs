@@ -1,0 +1,330 @@
+//! A fingertip's flight recording, read out over the service channel (`fingertip
+//! fetch-recording`) and written as a trace that replays on the PC as the chip ran.
+//!
+//! The fingertip keeps the detector's inputs tick by tick as the core read them (each
+//! channel's sample in its working unit, 16.16 bits), the phase and the channels withheld,
+//! with the detector's state saved before the first of them ([`detector_core::State::save`]).
+//! The readout is that state, then one row per tick: the phase (`u8`), the withheld
+//! channels (`u16`), each channel's sample (`i32`), little-endian. As a trace: the time
+//! column is the tick over the rate, each channel's sample in SI (its bits / 2¹⁶ / the
+//! channel's scale: the replay's conversion gives the same bits back), a `phase` column,
+//! a `withheld` column, and the state and first tick in the metadata, so that
+//! [`crate::replay`] starts where the chip did.
+
+use detector_core::{Detector, State};
+use fingertip_can::service::{ErrorCode, RecordingCause, RecordingInfo, Request, Response};
+
+use super::service::{Client, ClientError, Link};
+use crate::replay::{DecisionRecord, FIRST_TICK_KEY, STATE_KEY, WITHHELD_COLUMN};
+use crate::trace::{Labels, Trace, TraceError};
+
+/// Bytes of a row before its samples: phase, withheld channels.
+const ROW_HEAD: usize = 3;
+
+/// One tick of a recording.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RecordedRow {
+    /// The phase's index in the detector's configuration.
+    pub phase: u8,
+    /// The channels withheld (bit `i` for channel `i`).
+    pub withheld: u16,
+    /// Each channel's sample, 16.16 bits in its working unit.
+    pub samples: Vec<i32>,
+}
+
+/// A frozen recording as read out.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Recording {
+    /// What the fingertip reported of it.
+    pub info: RecordingInfo,
+    /// The detector's state before the first row ([`State::SAVED_BYTES`]).
+    pub saved: Vec<u8>,
+    /// One row per tick from `info.first_tick` on.
+    pub rows: Vec<RecordedRow>,
+}
+
+/// Why a recording could not be fetched or written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordingError {
+    /// The exchange failed.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// The fingertip refused a request.
+    #[error("the fingertip refused: {}: {text}", code.name())]
+    Refused {
+        /// Why.
+        code: ErrorCode,
+        /// Its words.
+        text: String,
+    },
+    /// It answered something else than the request's response.
+    #[error("unexpected answer to {request}: {answer}")]
+    Unexpected {
+        /// The request.
+        request: &'static str,
+        /// The answer.
+        answer: String,
+    },
+    /// Nothing is frozen to read.
+    #[error(
+        "nothing frozen to read: the recorder holds {rows} ticks and waits for a confirmation or a fault (then 50 ms more)"
+    )]
+    NotFrozen {
+        /// Rows held so far.
+        rows: u32,
+    },
+    /// A page came back for another offset than asked, or empty before the end.
+    #[error("the readout broke off at byte {at} of {bytes}: {why}")]
+    Readout {
+        /// Where.
+        at: u32,
+        /// The readout's length.
+        bytes: u32,
+        /// What came instead.
+        why: String,
+    },
+    /// The readout's length is not a saved state and whole rows.
+    #[error(
+        "the readout is {bytes} bytes: not a saved state ({state} bytes) and {rows} rows of {row} bytes"
+    )]
+    Length {
+        /// Its length.
+        bytes: usize,
+        /// A saved state's length.
+        state: usize,
+        /// The rows reported.
+        rows: u32,
+        /// A row's length.
+        row: usize,
+    },
+    /// The recording is of another detector than the configuration's.
+    #[error(
+        "the recording was made by the detector whose image has CRC-32 {recorded:#010x}; the configuration builds {config:#010x} (give the configuration the fingertip ran)"
+    )]
+    Detector {
+        /// The recording's.
+        recorded: u32,
+        /// The configuration's.
+        config: u32,
+    },
+    /// The trace could not be made.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// The trace does not replay.
+    #[error(transparent)]
+    Replay(#[from] crate::replay::ReplayError),
+    /// The PC's replay does not confirm what froze the recording, at its tick.
+    #[error(
+        "the PC's replay differs from the fingertip: {event} was confirmed at tick {tick} there, but the replay confirms {replayed}"
+    )]
+    Diverged {
+        /// The event the fingertip confirmed.
+        event: String,
+        /// At its tick.
+        tick: u32,
+        /// What the replay confirmed.
+        replayed: String,
+    },
+}
+
+/// Sends `request`, an error response an error.
+fn ask<L: Link>(client: &mut Client<L>, request: &Request<'_>) -> Result<Response, RecordingError> {
+    match client.request(request)? {
+        Response::Error(code, text) => Err(RecordingError::Refused {
+            code,
+            text: text.to_string(),
+        }),
+        r => Ok(r),
+    }
+}
+
+/// What the fingertip's recorder holds.
+pub fn info<L: Link>(client: &mut Client<L>) -> Result<RecordingInfo, RecordingError> {
+    match ask(client, &Request::RecordingInfo)? {
+        Response::Recording(i) => Ok(i),
+        other => Err(RecordingError::Unexpected {
+            request: "recording info",
+            answer: format!("{other:?}"),
+        }),
+    }
+}
+
+/// Reads the frozen recording out, page by page (each page checked by its CRC-32 and
+/// retried by the client when lost or corrupted).
+pub fn fetch<L: Link>(client: &mut Client<L>) -> Result<Recording, RecordingError> {
+    let info = info(client)?;
+    if !info.frozen {
+        return Err(RecordingError::NotFrozen { rows: info.rows });
+    }
+    let mut bytes = Vec::with_capacity(info.bytes as usize);
+    while (bytes.len() as u32) < info.bytes {
+        let at = bytes.len() as u32;
+        let broke = |why: String| RecordingError::Readout {
+            at,
+            bytes: info.bytes,
+            why,
+        };
+        match ask(client, &Request::RecordingRead(at))? {
+            Response::Page { offset, data } if offset == at && !data.is_empty() => {
+                bytes.extend_from_slice(&data);
+            }
+            Response::Page { offset, data } => {
+                return Err(broke(format!("{} bytes from byte {offset}", data.len())));
+            }
+            other => return Err(broke(format!("{other:?}"))),
+        }
+    }
+    parse(info, &bytes)
+}
+
+/// The recording in a readout of `bytes`, as `info` describes it.
+pub fn parse(info: RecordingInfo, bytes: &[u8]) -> Result<Recording, RecordingError> {
+    let n = usize::from(info.channels);
+    let row = ROW_HEAD + 4 * n;
+    let length = || RecordingError::Length {
+        bytes: bytes.len(),
+        state: State::SAVED_BYTES,
+        rows: info.rows,
+        row,
+    };
+    let (saved, rest) = bytes
+        .split_at_checked(State::SAVED_BYTES)
+        .ok_or_else(length)?;
+    if rest.len() != info.rows as usize * row {
+        return Err(length());
+    }
+    let rows = rest
+        .chunks_exact(row)
+        .map(|r| RecordedRow {
+            phase: r[0],
+            withheld: u16::from_le_bytes([r[1], r[2]]),
+            samples: r[ROW_HEAD..]
+                .chunks_exact(4)
+                .map(|b| i32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+        })
+        .collect();
+    Ok(Recording {
+        info,
+        saved: saved.to_vec(),
+        rows,
+    })
+}
+
+impl Recording {
+    /// The recording as a trace for `detector` (the configuration the fingertip ran,
+    /// whose image's CRC-32 is `image_crc`), named `name`.
+    pub fn to_trace(
+        &self,
+        detector: &Detector,
+        image_crc: u32,
+        name: &str,
+    ) -> Result<Trace, RecordingError> {
+        if image_crc != self.info.detector_crc {
+            return Err(RecordingError::Detector {
+                recorded: self.info.detector_crc,
+                config: image_crc,
+            });
+        }
+        let rate = f64::from(self.info.rate_hz);
+        let first = self.info.first_tick;
+        let t = (0..self.rows.len())
+            .map(|k| f64::from(first.wrapping_add(k as u32)) / rate)
+            .collect();
+        let mut columns: Vec<(String, Vec<f64>)> = detector
+            .channels()
+            .iter()
+            .enumerate()
+            .map(|(k, c)| {
+                let scale = f64::from(detector.channel_scales().get(k).copied().unwrap_or(1.0));
+                let values = self
+                    .rows
+                    .iter()
+                    .map(|r| f64::from(r.samples.get(k).copied().unwrap_or(0)) / 65536.0 / scale)
+                    .collect();
+                (c.to_string(), values)
+            })
+            .collect();
+        columns.push((
+            WITHHELD_COLUMN.to_string(),
+            self.rows.iter().map(|r| f64::from(r.withheld)).collect(),
+        ));
+        let mut phase = Labels::new();
+        for r in &self.rows {
+            phase.push(
+                detector
+                    .phases()
+                    .get(usize::from(r.phase))
+                    .map_or("?", |p| p.as_str()),
+            );
+        }
+        let mut trace = Trace::from_columns(name, t, columns)?.with_phase(phase)?;
+        let cause = match self.info.cause {
+            Some(RecordingCause::Confirmed(e)) => format!(
+                "{} confirmed",
+                detector
+                    .events()
+                    .get(usize::from(e))
+                    .map_or("?", |n| n.as_str())
+            ),
+            Some(RecordingCause::Fault(mask)) => format!("channels withheld: {mask:#06x}"),
+            None => "none".to_string(),
+        };
+        for (key, value) in [
+            (
+                "description",
+                "flight recording read out of a fingertip".to_string(),
+            ),
+            ("trigger", cause),
+            ("trigger_tick", self.info.trigger_tick.to_string()),
+            ("detector_crc", format!("{:#010x}", self.info.detector_crc)),
+            ("rate_hz", self.info.rate_hz.to_string()),
+            (FIRST_TICK_KEY, first.to_string()),
+            (STATE_KEY, hex::encode(&self.saved)),
+        ] {
+            trace.push_metadata(key, &value)?;
+        }
+        Ok(trace)
+    }
+
+    /// Replays `trace` (this recording's, from [`Recording::to_trace`]) through
+    /// `detector` and checks that it confirms what froze the recording at the tick the
+    /// fingertip did; returns every level the replay raised.
+    pub fn check_replay(
+        &self,
+        detector: &Detector,
+        trace: &Trace,
+    ) -> Result<Vec<DecisionRecord>, RecordingError> {
+        let decisions = crate::replay::replay(detector, trace, |_, _, _| {})?;
+        if let Some(RecordingCause::Confirmed(e)) = self.info.cause {
+            let event = detector
+                .events()
+                .get(usize::from(e))
+                .map_or("?", |n| n.as_str());
+            let rate = f64::from(self.info.rate_hz);
+            let tick_of = |t_s: f64| (t_s * rate).round() as u32;
+            let confirms: Vec<&DecisionRecord> =
+                decisions.iter().filter(|d| d.is_confirm()).collect();
+            let same = confirms
+                .iter()
+                .any(|d| d.event == event && tick_of(d.t_s) == self.info.trigger_tick);
+            if !same {
+                let replayed = if confirms.is_empty() {
+                    "nothing".to_string()
+                } else {
+                    confirms
+                        .iter()
+                        .map(|d| format!("{} at tick {}", d.event, tick_of(d.t_s)))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                };
+                return Err(RecordingError::Diverged {
+                    event: event.to_string(),
+                    tick: self.info.trigger_tick,
+                    replayed,
+                });
+            }
+        }
+        Ok(decisions)
+    }
+}
