@@ -38,7 +38,7 @@ use core::fmt;
 
 use super::codec::{ContextPart, ContextPartMsg, ContextSlot, DecodeError, Message, PhaseMsg};
 use super::{Address, ContextGroup, Counter, Id, MessageKind, NodeId};
-use detector_core::{MAX_PHASES, Signal, Tick};
+use detector_core::{MAX_PHASES, Tick};
 
 /// Why a received frame was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -379,17 +379,20 @@ pub struct Freshness {
     pub tip_state: bool,
 }
 
-/// The controller's inputs to the detector at a tick: `None` where the value is stale
-/// or was never received, so the caller flags the channels faulty.
+/// The controller's inputs to the detector at a tick, as the frames carry them (raw, in
+/// steps of [`ContextPart::scale`]: the caller converts them to the detector's units in
+/// one rounding): `None` where the value is stale or was never received, so the caller
+/// flags the channels faulty.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ControllerInputs {
-    /// Desired tip velocity (x, y), m/s: channels `vel_des_x`, `vel_des_y`.
-    pub vel_des: Option<[Signal; 2]>,
-    /// Desired tip acceleration (x, y), m/s²: channels `acc_des_x`, `acc_des_y`.
-    pub acc_des: Option<[Signal; 2]>,
-    /// Tip position error (x, y), m: channels `pos_err_x`, `pos_err_y`.
-    pub pos_err: Option<[Signal; 2]>,
+    /// Desired tip velocity (x, y), steps of 0.1 mm/s: channels `vel_des_x`, `vel_des_y`.
+    pub vel_des: Option<[i16; 2]>,
+    /// Desired tip acceleration (x, y), steps of 2 mm/s²: channels `acc_des_x`,
+    /// `acc_des_y`.
+    pub acc_des: Option<[i16; 2]>,
+    /// Tip position error (x, y), steps of 1 µm: channels `pos_err_x`, `pos_err_y`.
+    pub pos_err: Option<[i16; 2]>,
 }
 
 /// A receiver parameter is invalid.
@@ -653,7 +656,6 @@ impl Receiver {
                 .parts
                 .get(p as usize)
                 .and_then(|h| h.fresh(now, self.context_timeout))
-                .map(|raw| p.signals(raw))
         };
         let f = self.freshness(state, now);
         ControllerInputs {
@@ -837,7 +839,7 @@ mod tests {
         give(&r, &mut s, 1000, &ctx(1, 0, 500)).unwrap();
         assert!(r.poll(&mut s, 1100).context);
         let v = r.inputs(&s, 1100).vel_des.unwrap();
-        assert!((v[0].to_f64() - 0.05).abs() < 1e-4);
+        assert_eq!(v[0], 500, "0.05 m/s in steps of 0.1 mm/s");
         assert!(r.inputs(&s, 1100).pos_err.is_some());
         assert!(!r.poll(&mut s, 1101).context);
         assert!(r.is_context_stale(&s, 1101));

@@ -24,12 +24,13 @@
 //! [`TickRunner::step`].
 
 use detector_core::{
-    Detector, DetectorTick, EventMask, ImageError, Inputs, Level, Output, State, Tick,
+    Detector, DetectorTick, EventMask, ImageError, Inputs, Level, MAX_CHANNELS, Output, Signal,
+    State, Tick,
 };
 use fingertip_can::service::{DetectorName, Mode, NAME_MAX};
 use fingertip_can::{
-    BusFormat, CanFrame, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver, ResetReason,
-    RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
+    BusFormat, CanFrame, ContextPart, FaultFlags, MessageKind, NodeId, NodeIdSource, Receiver,
+    ResetReason, RxConfigError, Status, Transmitter, TxConfigError, TxFrames, TxState,
 };
 
 use crate::channel_set::ChannelSet;
@@ -41,8 +42,10 @@ use crate::timing::{Lateness, TickTiming, budget_cycles, cycles_to_tenths_us};
 use crate::txqueue::Pushed;
 use crate::wiring::{ADC_CHANNELS, CONTEXT_CHANNELS, TIP_STATE_CHANNELS};
 
-/// Where the board's inputs go in the configuration's channel order: `None` for an
-/// input the configuration does not use.
+/// Where the board's inputs go in the configuration's channel order (`None` for an
+/// input the configuration does not use), and how each becomes a sample in its
+/// channel's working unit (SI × the channel's `scale`, as
+/// [`Detector::sample_from_si`] on the PC).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub struct ChannelMap {
@@ -52,17 +55,56 @@ pub struct ChannelMap {
     pub context: [Option<u8>; CONTEXT_CHANNELS.len()],
     /// The [`TIP_STATE_CHANNELS`]: pos_err x, y.
     pub tip_state: [Option<u8>; TIP_STATE_CHANNELS.len()],
+    /// By configuration channel: steps of 2⁻¹⁶ working unit per step of what feeds it
+    /// (a calibrated ADC sample's 2⁻¹⁶ SI unit, a context frame's raw step), Q16.
+    pub factor: [i64; MAX_CHANNELS],
 }
 
 impl ChannelMap {
-    /// Looks the board's channels up in a detector's configuration by name.
+    /// Looks the board's channels up in a detector's configuration by name, with the
+    /// conversion of each into its working unit.
     pub fn resolve(detector: &Detector) -> ChannelMap {
         let find = |name: &&str| detector.channel(name).and_then(|i| u8::try_from(i).ok());
-        ChannelMap {
+        let mut map = ChannelMap {
             adc: ADC_CHANNELS.each_ref().map(find),
             context: CONTEXT_CHANNELS.each_ref().map(find),
             tip_state: TIP_STATE_CHANNELS.each_ref().map(find),
+            factor: [0; MAX_CHANNELS],
+        };
+        // SI per step of each source: 2⁻¹⁶ for a calibrated sample, the protocol's step
+        // for the controller's values.
+        let adc = map.adc.map(|slot| (slot, 1.0 / 65536.0));
+        let context = map.context.iter().enumerate().map(|(k, &slot)| {
+            let part = if k < 2 {
+                ContextPart::Velocity
+            } else {
+                ContextPart::Acceleration
+            };
+            (slot, part.scale())
+        });
+        let tip = map
+            .tip_state
+            .map(|slot| (slot, ContextPart::PositionError.scale()));
+        for (slot, si_per_step) in adc.into_iter().chain(context).chain(tip) {
+            let Some(i) = slot.map(usize::from) else {
+                continue;
+            };
+            let scale = detector.channel_scales().get(i).copied().unwrap_or(1.0);
+            if let Some(f) = map.factor.get_mut(i) {
+                // Working 2⁻¹⁶ steps per source step, Q16; a scale too large saturates.
+                let x = f64::from(scale) * si_per_step * 65536.0 * 65536.0;
+                *f = (x + 0.5f64.copysign(x)) as i64;
+            }
         }
+        map
+    }
+
+    /// A source value (a calibrated sample's bits, or a frame's raw value) as the sample
+    /// of configuration channel `i`, rounded to nearest and saturated.
+    pub fn convert(&self, i: usize, source: i64) -> Signal {
+        let f = self.factor.get(i).copied().unwrap_or(0);
+        let q = source.saturating_mul(f).saturating_add(1 << 15) >> 16;
+        Signal::from_bits(q.clamp(i64::from(i32::MIN), i64::from(i32::MAX)) as i32)
     }
 
     fn set(slots: &[Option<u8>]) -> ChannelSet {
@@ -595,18 +637,21 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
         let map = &self.map;
         let samples = &mut self.inputs.samples;
         let mut faults = ChannelSet::EMPTY;
-        let mut put = |slot: Option<u8>, value: Option<detector_core::Signal>| {
+        let mut put = |slot: Option<u8>, value: Option<i64>| {
             if let Some(i) = slot {
                 let i = usize::from(i);
                 match (samples.get_mut(i), value) {
-                    (Some(s), Some(v)) => *s = v,
+                    (Some(s), Some(v)) => *s = map.convert(i, v),
                     // Withheld: keep the last value (the core ignores it) and flag it.
                     _ => faults.insert(i),
                 }
             }
         };
         for (k, (&slot, &value)) in map.adc.iter().zip(&sample.values).enumerate() {
-            put(slot, (!sample.faults.contains(k)).then_some(value));
+            put(
+                slot,
+                (!sample.faults.contains(k)).then_some(i64::from(value.to_bits())),
+            );
         }
         let vel = controller.vel_des;
         let acc = controller.acc_des;
@@ -615,10 +660,16 @@ impl<'d, T: DetectorTick> Engine<'d, T> {
                 0 | 1 => vel.and_then(|v| v.get(k).copied()),
                 _ => acc.and_then(|a| a.get(k - 2).copied()),
             };
-            put(slot, v);
+            put(slot, v.map(i64::from));
         }
         for (k, &slot) in map.tip_state.iter().enumerate() {
-            put(slot, controller.pos_err.and_then(|p| p.get(k).copied()));
+            put(
+                slot,
+                controller
+                    .pos_err
+                    .and_then(|p| p.get(k).copied())
+                    .map(i64::from),
+            );
         }
 
         self.inputs.faults = faults.into();
@@ -1241,6 +1292,32 @@ mod tests {
         assert_eq!(m.tip_state, [Some(6), Some(7)]);
         assert_eq!(m.context_channels(), ChannelSet::from_bits(0b11_0011));
         assert_eq!(m.tip_state_channels(), ChannelSet::from_bits(0b1100_0000));
+    }
+
+    #[test]
+    fn the_default_detector_reads_each_channel_in_its_working_unit() {
+        // configs/approach.toml works in cN, mm and mm/s: the board converts the
+        // calibrated newtons and the frames' raw steps to those in one rounding, as the
+        // PC's replay converts a trace's SI values.
+        let d = embedded();
+        let mut e = Engine::new(leak(&d), ApproachTick, board_params()).unwrap();
+        let shared = RxShared::new();
+        deliver(&shared, &e, 0, context(0, 0, 0.05, 12e-6));
+        e.tick(&sample(0, -1.25, 2.0), &shared, &Health::default());
+        let t = e.ticked().expect("the detector ran");
+        let at = |name: &str| t.inputs.samples[d.channel(name).unwrap()];
+        assert_eq!(
+            at("force_x"),
+            d.sample_from_si(d.channel("force_x").unwrap(), -1.25)
+        );
+        assert_eq!(at("force_x").to_f64(), -125.0, "centinewtons");
+        assert_eq!(at("skin_accel").to_f64(), 2.0);
+        assert_eq!(at("vel_des_x").to_f64(), 50.0, "mm/s");
+        assert_eq!(
+            at("pos_err_x"),
+            Signal::from_f64(0.012),
+            "12 µm as mm, to the nearest step: no coarser than the frame's 1 µm"
+        );
     }
 
     #[test]

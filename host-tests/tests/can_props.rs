@@ -323,9 +323,9 @@ proptest! {
             let inputs = rx.inputs(&state, now);
             let [vel, acc, pos] = held.map(fresh);
             let context = vel.is_some() && acc.is_some();
-            prop_assert_eq!(inputs.vel_des, vel.filter(|_| context).map(|(v, _)| ContextPart::Velocity.signals(v)));
-            prop_assert_eq!(inputs.acc_des, acc.filter(|_| context).map(|(v, _)| ContextPart::Acceleration.signals(v)));
-            prop_assert_eq!(inputs.pos_err, pos.map(|(v, _)| ContextPart::PositionError.signals(v)));
+            prop_assert_eq!(inputs.vel_des, vel.filter(|_| context).map(|(v, _)| v));
+            prop_assert_eq!(inputs.acc_des, acc.filter(|_| context).map(|(v, _)| v));
+            prop_assert_eq!(inputs.pos_err, pos.map(|(v, _)| v));
             let f = rx.freshness(&state, now);
             prop_assert_eq!(f.phase, phase_at.is_some_and(|at| now.wrapping_sub(at) <= timeout));
 
