@@ -1,8 +1,10 @@
 //! Prepares what the QEMU program embeds, on the PC:
 //!
-//! - `approach.image` and `approach_tick.rs`: the detector image of `configs/approach.toml`
-//!   (which the target loads in place, as the firmware does) and the tick generated from it
-//!   (`ApproachTick`), the firmware's way of running it, both by `detector_build::Generator`;
+//! - `approach.image` and `approach_tick.rs`: the detector image of `configs/approach.toml`,
+//!   or of the configuration named by `FINGERTIP_QEMU_CONFIG` (relative to the workspace
+//!   root), which the target loads in place, as the firmware does, and the tick generated
+//!   from it (`ApproachTick`), the firmware's way of running it, both by
+//!   `detector_build::Generator`;
 //! - `trace.ftrc`: the inputs to replay, in the format of `src/trace.rs`: the file named by
 //!   `FINGERTIP_QEMU_TRACE` if set (the host test writes the simulator's golden runs there),
 //!   else a deterministic synthetic trace generated here;
@@ -32,9 +34,14 @@ fn main() -> Result<()> {
         link_script(&manifest);
     }
 
-    let config_rel = "configs/approach.toml";
-    let generated = Generator::new(manifest.join("../..").join(config_rel))
+    // Another configuration's cost on the chip: FINGERTIP_QEMU_CONFIG (relative to the
+    // workspace root); the host test always builds the default's.
+    println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_CONFIG");
+    let config_rel =
+        env::var("FINGERTIP_QEMU_CONFIG").unwrap_or_else(|_| "configs/approach.toml".into());
+    let generated = Generator::new(manifest.join("../..").join(&config_rel))
         .tick_type("ApproachTick")
+        .file_stem("approach")
         .generate(&out)?;
     let config = generated.config;
     println!("cargo:rustc-env=FINGERTIP_QEMU_CONFIG_SOURCE={config_rel}");
