@@ -16,7 +16,8 @@
 //!
 //! A recording is one run of one detector: a detector put in service, the service state
 //! (which restarts the detector from a fresh state) or a skipped tick ends the run, and
-//! the next starts with a new saved state.
+//! the next starts with a new saved state; a run that ends after its trigger freezes then,
+//! with what it holds.
 //!
 //! The readout ([`Recorder::read`]) is the saved state of the oldest segment kept, then
 //! the rows of the kept segments, oldest first: docs/can-protocol.md gives the layout.
@@ -182,7 +183,13 @@ impl Recorder {
             && t.generation == self.generation
             && t.crc == self.crc;
         if !continues {
-            self.begin(t);
+            if self.recording && self.trigger != Trigger::NONE {
+                // The run ends before its freeze: what it holds around the trigger is kept.
+                self.frozen = true;
+                self.recording = false;
+            } else {
+                self.begin(t);
+            }
             return;
         }
         self.put_row(t);
@@ -216,8 +223,7 @@ impl Recorder {
         }
     }
 
-    /// A new run from tick `t`'s state: its first row is the next tick's. A trigger not
-    /// yet frozen is dropped with the run it was in.
+    /// A new run from tick `t`'s state: its first row is the next tick's.
     fn begin(&mut self, t: &Ticked<'_>) {
         let channels = t.channels.min(detector_core::MAX_CHANNELS) as u8;
         self.crc = t.crc;
@@ -494,6 +500,15 @@ mod tests {
         assert!(info.frozen);
         assert_eq!(info.cause, Some(RecordingCause::Fault(1 << 2)));
         assert_eq!(info.trigger_tick, 600);
+
+        // A run that ends 10 ms after its confirmation (a skipped tick) freezes there.
+        r.rearm();
+        feed(&mut r, &state, 1000..1400, Some(1350), 0);
+        feed(&mut r, &state, 1401..1500, None, 0);
+        let info = r.info();
+        assert!(info.frozen);
+        assert_eq!(info.cause, Some(RecordingCause::Confirmed(2)));
+        assert_eq!((info.first_tick, info.rows), (1001, 399));
     }
 
     #[test]

@@ -229,7 +229,8 @@ impl Recording {
         let rate = f64::from(self.info.rate_hz);
         let first = self.info.first_tick;
         let t = (0..self.rows.len())
-            .map(|k| f64::from(first.wrapping_add(k as u32)) / rate)
+            // Ticks counted on past a wrap of the fingertip's counter: time keeps rising.
+            .map(|k| (f64::from(first) + k as f64) / rate)
             .collect();
         let mut columns: Vec<(String, Vec<f64>)> = detector
             .channels()
@@ -302,7 +303,8 @@ impl Recording {
                 .get(usize::from(e))
                 .map_or("?", |n| n.as_str());
             let rate = f64::from(self.info.rate_hz);
-            let tick_of = |t_s: f64| (t_s * rate).round() as u32;
+            // The fingertip's tick, wrapped as its counter wraps.
+            let tick_of = |t_s: f64| (t_s * rate).round() as u64 as u32;
             let confirms: Vec<&DecisionRecord> =
                 decisions.iter().filter(|d| d.is_confirm()).collect();
             let same = confirms
@@ -326,5 +328,73 @@ impl Recording {
             }
         }
         Ok(decisions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn default_detector() -> Detector {
+        let config = detector_build::Config::from_toml(crate::APPROACH_TOML).expect("parses");
+        detector_build::build(&config).expect("builds")
+    }
+
+    /// A readout of `rows` quiet rows after a fresh state, for the default's channels.
+    fn readout(d: &Detector, first_tick: u32, rows: u32) -> (RecordingInfo, Vec<u8>) {
+        let channels = d.channels().len();
+        let mut bytes = vec![0u8; State::SAVED_BYTES];
+        d.new_state()
+            .save((&mut bytes[..]).try_into().expect("the saved length"));
+        for k in 0..rows {
+            bytes.extend_from_slice(&[0, 0, 0]);
+            for c in 0..channels {
+                let v = if c == 0 { k as i32 * 7 } else { 0 };
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let info = RecordingInfo {
+            frozen: true,
+            cause: None,
+            trigger_tick: 0,
+            first_tick,
+            rows,
+            channels: channels as u8,
+            rate_hz: 5000,
+            detector_crc: 0x1234_5678,
+            bytes: bytes.len() as u32,
+        };
+        (info, bytes)
+    }
+
+    #[test]
+    fn a_recording_across_the_tick_counters_wrap_keeps_its_time_rising() {
+        let d = default_detector();
+        let (info, bytes) = readout(&d, u32::MAX - 9, 40);
+        let rec = parse(info, &bytes).expect("whole");
+        assert_eq!(rec.rows.len(), 40);
+        assert_eq!(rec.rows[3].samples[0], 21);
+        let trace = rec.to_trace(&d, 0x1234_5678, "wrap").expect("a trace");
+        assert!(trace.time().windows(2).all(|w| w[1] > w[0]));
+        let text = trace.to_csv();
+        let read = Trace::parse(&text, "wrap.csv").expect("reads back");
+        // The samples come back to the same bits.
+        let force = read.column("force_x").expect("the first channel");
+        assert_eq!(d.sample_from_si(0, force[3]).to_bits(), 21);
+        rec.check_replay(&d, &read).expect("replays");
+    }
+
+    #[test]
+    fn a_readout_that_is_not_a_state_and_whole_rows_is_refused_naming_its_length() {
+        let d = default_detector();
+        let (info, bytes) = readout(&d, 100, 5);
+        let e = parse(info, &bytes[..bytes.len() - 1]).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains(&format!("{} bytes: not a saved state", bytes.len() - 1)),
+            "{e}"
+        );
+        let e = parse(info, &bytes[..100]).unwrap_err();
+        assert!(matches!(e, RecordingError::Length { .. }), "{e}");
     }
 }
