@@ -334,7 +334,10 @@ fn replay_with(
             row,
             faults,
             |k| columns.get(k).and_then(|c| c.get(row)).copied(),
-            |tick| t.get(tick as usize).copied().unwrap_or(f64::NAN),
+            |r| match usize::try_from(r).ok().and_then(|r| t.get(r)) {
+                Some(&at) => at,
+                None => t[0] + r as f64 / trace.rate_hz(),
+            },
         );
         each_tick(row, &ticker.state, &ticker.out);
     }
@@ -516,7 +519,7 @@ fn replay_rows(
                 row,
                 faults,
                 |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
-                |tick| t0 + f64::from(tick) * period,
+                |r| t0 + r as f64 * period,
             );
             each_tick(
                 d,
@@ -642,14 +645,14 @@ impl Ticker {
 
     /// One tick on row `row` with the channels `faults` withheld: channel `k`'s SI value
     /// from `sample(k)` (0 when missing); levels raised are recorded with times from
-    /// `time_of(row of the tick)`.
+    /// `time_of(row of the tick)` (negative before the first row).
     fn tick(
         &mut self,
         detector: &Detector,
         row: usize,
         faults: u32,
         sample: impl Fn(usize) -> Option<f64>,
-        time_of: impl Fn(Tick) -> f64,
+        time_of: impl Fn(i64) -> f64,
     ) {
         self.inputs.faults = faults;
         for (k, s) in self
@@ -668,7 +671,9 @@ impl Ticker {
         };
         let now = self.first.wrapping_add(row as Tick);
         tick.tick_into(&mut self.state, now, &self.inputs, &mut self.out);
+        // The row of a tick: an onset may come before a recording's first row.
         let first = self.first;
+        let row_of = |tick: Tick| i64::from(tick.wrapping_sub(first) as i32);
         for d in &self.out.decisions {
             self.records.push(DecisionRecord {
                 event: detector
@@ -678,8 +683,8 @@ impl Ticker {
                     .unwrap_or_default(),
                 level: d.level.name(),
                 confidence: d.confidence.to_f64(),
-                onset_s: time_of(d.onset.wrapping_sub(first)),
-                t_s: time_of(d.tick.wrapping_sub(first)),
+                onset_s: time_of(row_of(d.onset)),
+                t_s: time_of(row_of(d.tick)),
             });
         }
     }

@@ -1171,3 +1171,130 @@ fn load_and_info_name_what_is_wrong() {
         assert!(err.contains(want), "{args:?}: {err}");
     }
 }
+
+/// A flight recording, as `fetch-recording` writes it, replays from the state it saved:
+/// `fingertip replay` on the rows from the alert on confirms at the tick the whole run
+/// does, with the onset before the recording's first row; a state that is not the
+/// detector's is refused in one line naming it.
+#[test]
+fn a_flight_recording_replays_from_its_saved_state() {
+    use fingertip::can_tools::recording::{RecordedRow, Recording};
+    use fingertip_can::service::{RecordingCause, RecordingInfo};
+
+    let dir = scratch("recording");
+    let run = fingertip::trace::Trace::read(simulate(&dir, "contact_hard_8")).expect("reads");
+    let config = detector_build::Config::from_toml(fingertip::APPROACH_TOML).expect("parses");
+    let d = detector_build::build(&config).expect("builds");
+    let crc =
+        fingertip_can::service::crc32(&detector_build::compile(&config).expect("compiles").image());
+    // The whole run: the state after each row, and the contact's confirmation.
+    let mut states = Vec::new();
+    let whole =
+        fingertip::replay::replay(&d, &run, |_, s, _| states.push(s.clone())).expect("replays");
+    let confirm = whole
+        .iter()
+        .find(|r| r.is_confirm())
+        .expect("confirmed")
+        .clone();
+    let alert = whole
+        .iter()
+        .find(|r| !r.is_confirm())
+        .expect("alerted")
+        .clone();
+    // The recording starts after the alert, one tick before the confirmation.
+    let first = (confirm.t_s * 5000.0).round() as usize;
+    assert!(first > (alert.t_s * 5000.0).round() as usize);
+    let mut saved = vec![0u8; detector_core::State::SAVED_BYTES];
+    states[first - 1].save((&mut saved[..]).try_into().expect("length"));
+    let columns: Vec<&[f64]> = d
+        .channels()
+        .iter()
+        .map(|c| run.column(c).expect("column"))
+        .collect();
+    let rows: Vec<RecordedRow> = (first..run.len())
+        .map(|k| RecordedRow {
+            phase: 0,
+            withheld: 0,
+            samples: (0..columns.len())
+                .map(|c| d.sample_from_si(c, columns[c][k]).to_bits())
+                .collect(),
+        })
+        .collect();
+    let event = d
+        .events()
+        .iter()
+        .position(|e| e.as_str() == "contact")
+        .expect("an event") as u8;
+    let rec = Recording {
+        info: RecordingInfo {
+            frozen: true,
+            cause: Some(RecordingCause::Confirmed(event)),
+            trigger_tick: first as u32,
+            first_tick: first as u32,
+            rows: rows.len() as u32,
+            channels: columns.len() as u8,
+            rate_hz: 5000,
+            detector_crc: crc,
+            bytes: 0,
+        },
+        saved,
+        rows,
+    };
+    let trace = rec.to_trace(&d, crc, "recording").expect("a trace");
+    rec.check_replay(&d, &trace)
+        .expect("confirms at the trigger");
+    let path = dir.join("recording.csv");
+    trace.write(&path).expect("written");
+
+    let out = fingertip(&["replay", path.to_str().expect("utf-8"), "--json"]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    let events = json["events"].as_array().expect("events");
+    let replayed = events
+        .iter()
+        .find(|e| e["level"] == "confirm")
+        .expect("the recording confirms");
+    assert_eq!(replayed["event"], "contact");
+    assert!(
+        (replayed["t_s"].as_f64().expect("t") - confirm.t_s).abs() < 1e-9,
+        "{replayed}"
+    );
+    assert!(
+        (replayed["onset_s"].as_f64().expect("onset") - confirm.onset_s).abs() < 1e-9,
+        "the onset, before the first row: {replayed}"
+    );
+
+    // From a fresh state instead, the same rows confirm later, or not at all.
+    let fresh = text(&std::fs::read(&path).expect("read"))
+        .lines()
+        .filter(|l| !l.starts_with("# state:"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let fresh_path = dir.join("fresh.csv");
+    std::fs::write(&fresh_path, fresh).expect("write");
+    let out = fingertip(&["replay", fresh_path.to_str().expect("utf-8"), "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert!(
+        json["events"]
+            .as_array()
+            .expect("events")
+            .iter()
+            .all(|e| e["level"] != "confirm" || e["t_s"].as_f64() > Some(confirm.t_s)),
+        "the saved state matters: {json}"
+    );
+
+    // Another detector's state (a shorter one) is refused, naming the metadata.
+    let bad = text(&std::fs::read(&path).expect("read")).replacen(
+        "# state: 46545331",
+        "# state: 4654533100",
+        1,
+    );
+    std::fs::write(&path, bad).expect("write");
+    let out = fingertip(&["replay", path.to_str().expect("utf-8")]);
+    let stderr = text(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("metadata 'state'") && stderr.contains("3005 bytes"),
+        "{stderr}"
+    );
+}
