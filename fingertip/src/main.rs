@@ -169,15 +169,25 @@ enum Command {
     /// least 50 ms before and 50 ms after the confirmation or fault that froze it) and
     /// write it as a trace that `fingertip replay` runs as the fingertip did: the same
     /// confirmations at the same ticks, checked here before it is written. Then re-arms
-    /// the recorder (unless --keep).
+    /// the recorder (unless --keep). With --follow, collects every recording as it
+    /// freezes, for a corpus to fit on (docs/recordings.md).
     FetchRecording {
         /// The configuration the fingertip runs (TOML): names the columns; its image's
         /// CRC-32 must be the recording's.
         #[arg(long)]
         config: PathBuf,
         /// The trace to write.
-        #[arg(long)]
-        out: PathBuf,
+        #[arg(long, required_unless_present = "follow", conflicts_with = "follow")]
+        out: Option<PathBuf>,
+        /// Wait for each recording to freeze and write it into this directory
+        /// (`node<N>-tick<first tick>.csv`), re-arming after each, until --count
+        /// recordings or Ctrl-C. The fingertip records nothing while one waits to be
+        /// read (about 0.15 s).
+        #[arg(long, conflicts_with = "keep")]
+        follow: Option<PathBuf>,
+        /// With --follow: stop after this many recordings.
+        #[arg(long, requires = "follow")]
+        count: Option<usize>,
         /// The fingertip's node id (0..=14).
         #[arg(long)]
         node: u8,
@@ -444,10 +454,22 @@ fn run(cli: Cli) -> Result<()> {
         Command::FetchRecording {
             config,
             out,
+            follow,
+            count,
             node,
             iface,
             keep,
-        } => fetch_recording_cmd(&config, &out, node, &iface, keep),
+        } => fetch_recording_cmd(
+            &config,
+            Fetch {
+                out,
+                follow,
+                count,
+                keep,
+            },
+            node,
+            &iface,
+        ),
         Command::Busload {
             fingertips,
             decimation,
@@ -1295,10 +1317,27 @@ fn calibrate_cmd(node: u8, iface: &str, keys: &[String]) -> Result<()> {
     Ok(())
 }
 
-fn fetch_recording_cmd(config: &Path, out: &Path, node: u8, iface: &str, keep: bool) -> Result<()> {
+/// What `fetch-recording` fetches, and where it writes it.
+struct Fetch {
+    out: Option<PathBuf>,
+    follow: Option<PathBuf>,
+    count: Option<usize>,
+    keep: bool,
+}
+
+fn fetch_recording_cmd(config: &Path, fetch: Fetch, node: u8, iface: &str) -> Result<()> {
     use fingertip::can_tools::recording;
     use fingertip_can::service::{Request, crc32};
     let node = node_id(node)?;
+    // Where it writes, before anything is read.
+    let into = match (&fetch.out, &fetch.follow) {
+        (Some(out), _) => out.parent().filter(|p| !p.as_os_str().is_empty()),
+        (None, Some(dir)) => Some(dir.as_path()),
+        (None, None) => bail!("give --out or --follow"),
+    };
+    if let Some(dir) = into.filter(|d| !d.is_dir()) {
+        bail!("{}: not a directory", dir.display());
+    }
     let parsed = detector_build::load(config)?;
     let crc = crc32(
         &detector_build::compile(&parsed)
@@ -1307,34 +1346,56 @@ fn fetch_recording_cmd(config: &Path, out: &Path, node: u8, iface: &str, keep: b
     );
     let detector = detector_build::build(&parsed).with_context(|| config.display().to_string())?;
     let mut client = service_client(node, iface)?;
-    let rec = recording::fetch(&mut client).with_context(|| format!("node {}", node.get()))?;
-    let name = out.display().to_string();
-    let trace = rec.to_trace(&detector, crc, &name)?;
-    let decisions = rec.check_replay(&detector, &trace)?;
-    trace.write(out)?;
-    let info = &rec.info;
-    let rate = f64::from(info.rate_hz);
-    println!(
-        "node {}: {} ticks from tick {} ({:.1} ms), frozen {:.1} ms after tick {} ({}), written to {name}",
-        node.get(),
-        info.rows,
-        info.first_tick,
-        f64::from(info.rows) / rate * 1e3,
-        f64::from(
-            info.first_tick
-                .wrapping_add(info.rows)
-                .wrapping_sub(info.trigger_tick)
-        ) / rate
-            * 1e3,
-        info.trigger_tick,
-        trace.meta("trigger").unwrap_or("?"),
-    );
-    let confirmed = decisions.iter().filter(|d| d.is_confirm()).count();
-    println!(
-        "replayed on the PC from the fingertip's state: {confirmed} confirmation(s), the trigger's at its tick"
-    );
-    if !keep {
-        ask(&mut client, node, &Request::RecordingRearm)?;
+    let at_node = || format!("node {}", node.get());
+    let one = |client: &mut _, out: &Path| -> Result<()> {
+        let rec = recording::fetch(client).with_context(at_node)?;
+        let name = out.display().to_string();
+        let trace = rec.to_trace(&detector, crc, &name)?;
+        let decisions = rec.check_replay(&detector, &trace)?;
+        trace.write(out)?;
+        let info = &rec.info;
+        let rate = f64::from(info.rate_hz);
+        let end = info.first_tick.wrapping_add(info.rows);
+        println!(
+            "node {}: {} ticks from tick {} ({:.1} ms), frozen {:.1} ms after tick {} ({}), written to {name}",
+            node.get(),
+            info.rows,
+            info.first_tick,
+            f64::from(info.rows) / rate * 1e3,
+            f64::from(end.wrapping_sub(info.trigger_tick)) / rate * 1e3,
+            info.trigger_tick,
+            trace.meta("trigger").unwrap_or("?"),
+        );
+        let confirmed = decisions.iter().filter(|d| d.is_confirm()).count();
+        let matched = match info.cause {
+            Some(fingertip_can::service::RecordingCause::Confirmed(_)) => {
+                ", the trigger's at its tick"
+            }
+            _ => "",
+        };
+        println!(
+            "replayed on the PC from the fingertip's state: {confirmed} confirmation(s){matched}"
+        );
+        Ok(())
+    };
+    if let Some(out) = &fetch.out {
+        one(&mut client, out)?;
+        if !fetch.keep {
+            ask(&mut client, node, &Request::RecordingRearm)?;
+        }
+    } else if let Some(dir) = &fetch.follow {
+        let mut fetched = 0;
+        while fetch.count.is_none_or(|n| fetched < n) {
+            let Some(info) =
+                recording::wait_frozen(&mut client, 20_000, None).with_context(at_node)?
+            else {
+                continue;
+            };
+            let out = dir.join(format!("node{}-tick{}.csv", node.get(), info.first_tick));
+            one(&mut client, &out)?;
+            ask(&mut client, node, &Request::RecordingRearm)?;
+            fetched += 1;
+        }
     }
     Ok(())
 }

@@ -1141,6 +1141,32 @@ fn load_and_info_name_what_is_wrong() {
             "CAN interface nosuch0",
         ),
         (
+            vec![
+                "fetch-recording",
+                "--config",
+                approach,
+                "--node",
+                "3",
+                "--out",
+                "rec.csv",
+                "--iface",
+                "nosuch0",
+            ],
+            "CAN interface nosuch0",
+        ),
+        (
+            vec![
+                "fetch-recording",
+                "--config",
+                approach,
+                "--node",
+                "3",
+                "--follow",
+                "no/such/dir",
+            ],
+            "no/such/dir: not a directory",
+        ),
+        (
             vec!["calibrate", "--node", "3", "force_z.gain"],
             "unknown key `force_z.gain`",
         ),

@@ -731,3 +731,48 @@ fn a_page_lost_or_corrupted_on_the_bus_is_read_again() {
         assert_eq!(recording::fetch(&mut client).unwrap(), clean, "{fault:?}");
     }
 }
+
+#[test]
+fn recordings_are_collected_one_after_another_as_they_freeze() {
+    use fingertip::can_tools::recording::{self, RecordingError};
+    use fingertip::sim::{Scenario, SimOptions, simulate};
+
+    // Two contacts 0.8 s apart (the contact's confirmation holds 0.5 s after it ends).
+    let sim = |scenario: Scenario, seed: u64, duration_s: Option<f64>| {
+        let opts = SimOptions {
+            seed,
+            randomize: true,
+            duration_s,
+            ..SimOptions::default()
+        };
+        simulate(&scenario, &opts).unwrap()
+    };
+    let feed = Feed::new(&[
+        sim(Scenario::FreeMotion, 1, Some(0.3)),
+        sim(Scenario::ContactHard8, 2, None),
+        sim(Scenario::FreeMotion, 3, Some(0.8)),
+        sim(Scenario::ContactHard5, 4, None),
+    ]);
+    let end_us = (feed.rows.len() as u64 + 1000) * TICK_US;
+    let mut client = Client::new(Bus::new(Fingertip::fed(feed)));
+    let mut d = Detector::empty();
+    boot::load_detector(&mut d, boot::DETECTOR_IMAGE).unwrap();
+    let crc = crc32(boot::DETECTOR_IMAGE);
+    let mut triggers = Vec::new();
+    while let Some(info) = recording::wait_frozen(&mut client, 20_000, Some(end_us)).unwrap() {
+        let rec = recording::fetch(&mut client).unwrap();
+        assert_eq!(rec.info, info);
+        let trace = rec.to_trace(&d, crc, "collected").unwrap();
+        rec.check_replay(&d, &trace).unwrap();
+        triggers.push((info.trigger_tick, info.cause));
+        assert_eq!(
+            client.request(&Request::RecordingRearm).unwrap(),
+            Response::Done
+        );
+    }
+    assert_eq!(triggers.len(), 2, "{triggers:?}");
+    assert!(triggers[1].0 > triggers[0].0 + 4000, "{triggers:?}");
+    // Nothing more to read.
+    let e = recording::fetch(&mut client).unwrap_err();
+    assert!(matches!(e, RecordingError::NotFrozen { .. }), "{e}");
+}

@@ -149,6 +149,30 @@ pub fn info<L: Link>(client: &mut Client<L>) -> Result<RecordingInfo, RecordingE
     }
 }
 
+/// Waits until the fingertip's recorder holds a frozen recording, asking every `poll_us`
+/// µs on the link's clock; `None` once `until_us` has passed without one.
+pub fn wait_frozen<L: Link>(
+    client: &mut Client<L>,
+    poll_us: u64,
+    until_us: Option<u64>,
+) -> Result<Option<RecordingInfo>, RecordingError> {
+    loop {
+        let i = info(client)?;
+        if i.frozen {
+            return Ok(Some(i));
+        }
+        let link = client.link();
+        let next = link.now_us() + poll_us;
+        if until_us.is_some_and(|u| next > u) {
+            return Ok(None);
+        }
+        // Nothing else is asked meanwhile: a frame that arrives is a stray answer.
+        while link.now_us() < next {
+            link.recv(next).map_err(ClientError::from)?;
+        }
+    }
+}
+
 /// Reads the frozen recording out, page by page (each page checked by its CRC-32 and
 /// retried by the client when lost or corrupted).
 pub fn fetch<L: Link>(client: &mut Client<L>) -> Result<Recording, RecordingError> {
