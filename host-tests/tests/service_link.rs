@@ -18,29 +18,19 @@
 
 use std::collections::VecDeque;
 
-// The firmware's mutexes take critical sections: std's implementation on the PC.
-use critical_section as _;
+#[path = "board_support.rs"]
+mod board;
 
-use detector_core::{Confidence, Decision, Detector, MAX_EVENTS, Signal};
+use board::{Feed, Fingertip, TICK_US};
+use detector_core::Detector;
 use embassy_futures::block_on;
 use fingertip::can_tools::busload::fd_frame_bits;
 use fingertip::can_tools::service::{Client, Link};
 use fingertip_can::service::{ErrorCode, Key, Mode, Request, Response, crc32};
-use fingertip_can::{
-    BusFormat, ContextGroup, ContextMsg, ContextSlot, Counter, NodeId, NodeIdSource, ResetReason,
-};
-use firmware::boot::{self, ApproachTick};
-use firmware::engine::{BoardInfo, Health, Service};
-use firmware::flash_sim::SimFlash;
-use firmware::load::Loader;
-use firmware::nvm::{BootImage, Nvm, Slot};
-use firmware::recorder::RecorderCell;
-use firmware::sampling::AdcSample;
-use firmware::service_end::{Mailbox, Requests, ServiceEnd};
-use firmware::shared::RxShared;
+use firmware::boot;
+use firmware::engine::Service;
+use firmware::nvm::{BootImage, Slot};
 
-/// The detector's tick, µs.
-const TICK_US: u64 = 200;
 /// The fingertip's reaction to a frame, µs.
 const REACTION_US: u64 = 20;
 
@@ -57,159 +47,6 @@ enum Fault {
     Lose(usize),
     /// Flip bit `1` of frame `0`'s data.
     Corrupt(usize, usize),
-}
-
-/// A fingertip's firmware on the PC: what the board's tasks run.
-struct Fingertip {
-    service: Service<'static, ApproachTick>,
-    end: ServiceEnd,
-    requests: Requests<'static, 'static, &'static mut SimFlash>,
-    mailbox: &'static Mailbox<'static>,
-    recorder: &'static RecorderCell,
-    rx: RxShared,
-    tick: u32,
-    next_tick_us: u64,
-    /// The CRC-32 of the detector in service and of the one staged, at every tick.
-    seen: Vec<(u32, Option<u32>)>,
-    /// What the sensors and the controller give, if not zeros: row `k` at tick `k`.
-    feed: Option<Feed>,
-    /// Each tick's event confidences and the levels raised (with their ticks and
-    /// onsets), by tick.
-    outputs: Vec<([Confidence; MAX_EVENTS], Vec<Decision>)>,
-}
-
-/// A simulated run fed to the fingertip as its sensors and the controller would: the
-/// calibrated analog channels every tick, the controller's context frame (raw, as sent)
-/// every fifth tick. The last row is held after the end.
-struct Feed {
-    rows: Vec<[f64; 10]>,
-}
-
-impl Feed {
-    /// The ten board channels of `traces`, one after the other.
-    fn new(traces: &[fingertip::trace::Trace]) -> Feed {
-        let names = [
-            "force_x",
-            "force_y",
-            "skin_accel",
-            "stress_rate",
-            "vel_des_x",
-            "vel_des_y",
-            "acc_des_x",
-            "acc_des_y",
-            "pos_err_x",
-            "pos_err_y",
-        ];
-        let mut rows = Vec::new();
-        for t in traces {
-            let columns = names.map(|n| t.column(n).unwrap());
-            rows.extend((0..t.len()).map(|k| columns.map(|c| c[k])));
-        }
-        Feed { rows }
-    }
-
-    fn row(&self, tick: u32) -> &[f64; 10] {
-        &self.rows[(tick as usize).min(self.rows.len() - 1)]
-    }
-}
-
-impl Fingertip {
-    fn new() -> Fingertip {
-        let board = BoardInfo {
-            node: NodeId::new(3).unwrap(),
-            node_source: NodeIdSource::Straps,
-            format: BusFormat::Fd,
-            reset: ResetReason::PowerOn,
-            clock_fallback: false,
-        };
-        let active: &'static mut Detector = Box::leak(Box::new(Detector::empty()));
-        let spare: &'static mut Detector = Box::leak(Box::new(Detector::empty()));
-        let service = boot::start(active, boot::DETECTOR_IMAGE, ApproachTick, board);
-        let mailbox: &'static Mailbox<'static> = Box::leak(Box::new(Mailbox::new()));
-        let loader = Loader::new(spare, boot::RATE_HZ as f32);
-        let recorder: &'static RecorderCell = Box::leak(Box::new(RecorderCell::new()));
-        Fingertip {
-            service,
-            end: ServiceEnd::new(),
-            requests: Requests::new(
-                loader,
-                mailbox,
-                recorder,
-                Nvm::new(Box::leak(Box::new(SimFlash::new()))),
-            ),
-            recorder,
-            mailbox,
-            rx: RxShared::new(),
-            tick: 0,
-            next_tick_us: 0,
-            seen: Vec::new(),
-            feed: None,
-            outputs: Vec::new(),
-        }
-    }
-
-    /// Fed from `feed`.
-    fn fed(feed: Feed) -> Fingertip {
-        Fingertip {
-            feed: Some(feed),
-            ..Fingertip::new()
-        }
-    }
-
-    /// The analog sample of the tick, and the controller's frame at its control cycles.
-    fn inputs(&self) -> AdcSample {
-        let mut sample = AdcSample {
-            tick: self.tick,
-            ..AdcSample::default()
-        };
-        let Some(feed) = &self.feed else {
-            return sample;
-        };
-        let row = feed.row(self.tick);
-        for (v, &si) in sample.values.iter_mut().zip(&row[..4]) {
-            *v = Signal::from_f64(si);
-        }
-        if self.tick.is_multiple_of(5) {
-            let raw = |v: f64, step: f64, max: i16| {
-                (v / step).round().clamp(-f64::from(max), f64::from(max)) as i16
-            };
-            let node = NodeId::new(3).unwrap();
-            let mut m = ContextMsg {
-                counter: Counter((self.tick / 5 % 256) as u8),
-                time_us: self.tick.wrapping_mul(200),
-                ..ContextMsg::default()
-            };
-            m.slots[ContextGroup::slot_of(node)] = Some(ContextSlot {
-                vel_des: [raw(row[4], 1e-4, 4095), raw(row[5], 1e-4, 4095)],
-                acc_des: [raw(row[6], 2e-3, 4095), raw(row[7], 2e-3, 4095)],
-                pos_err: [raw(row[8], 1e-6, 32767), raw(row[9], 1e-6, 32767)],
-            });
-            let frame = m.encode(ContextGroup::of(node)).unwrap();
-            let r = self.service.receiver().unwrap();
-            self.rx
-                .with(|s| r.receive(s, self.tick, frame.id().into(), frame.data()))
-                .unwrap();
-        }
-        sample
-    }
-
-    /// Runs the detector's ticks up to `now_us`.
-    fn run_to(&mut self, now_us: u64) {
-        while self.next_tick_us <= now_us {
-            self.mailbox.serve(&mut self.service);
-            let sample = self.inputs();
-            let r = self.service.tick(&sample, &self.rx, &Health::default());
-            self.recorder.record(&self.service);
-            self.outputs
-                .push((r.output.confidences, r.output.decisions.to_vec()));
-            let Service::Running(e) = &self.service else {
-                panic!("the built-in detector runs")
-            };
-            self.seen.push((e.in_service().1, e.staged_crc()));
-            self.tick += 1;
-            self.next_tick_us += TICK_US;
-        }
-    }
 }
 
 /// The bus between the tool and one fingertip.
