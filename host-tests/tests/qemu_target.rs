@@ -811,6 +811,12 @@ fn qemu_instructions_per_tick_within_the_budget() {
         first.insns.get("tick").map_or(0, |i| i.n),
         table(&first)
     );
+    if let Some(save) = first.insns.get("state_save") {
+        println!(
+            "the flight recorder's saved state (State::save, once per 50 ms segment): {} instructions",
+            save.max
+        );
+    }
     let tick = first.insns.get("tick").expect("tick counts");
     if tick.max > AIM {
         println!(

@@ -352,8 +352,20 @@ mod target {
         );
         hprintln!("digest interpreted: {}", digest);
 
+        // A flight recorder saves the detector's state once per segment: its cost, the
+        // same for any state (every field is written).
+        let mut saved = [0u8; State::SAVED_BYTES];
+        let state = detector.new_state();
+        let mut save = Stats::new();
+        for record in 0..8 {
+            let ((), c) = timed(|| state.save(core::hint::black_box(&mut saved)));
+            save.add(meter.insns(c), Position { segment: 0, record });
+        }
+        core::hint::black_box(&saved);
+
         tick.print("tick");
         interpreted.print("interpreted");
+        save.print("state_save");
         for (s, name) in
             stages
                 .iter()
