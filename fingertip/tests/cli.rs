@@ -882,8 +882,8 @@ fn fit_writes_a_configuration_that_runs() {
     // A contact judged by the commanded acceleration alone: it cannot tell contacts apart.
     let bad = dir.join("bad.toml");
     let replaced = base.replacen(
-        "{ feature = \"press_fast\", weight = 1.0",
-        "{ feature = \"acc_des\", weight = 1.0",
+        "{ feature = \"press_fast_free\", weight = 1.0",
+        "{ feature = \"acc_step\", weight = 1.0",
         1,
     );
     assert_ne!(replaced, base);
@@ -903,7 +903,7 @@ fn fit_writes_a_configuration_that_runs() {
     let stderr = text(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        stderr.contains("`acc_des` does not separate event `contact`"),
+        stderr.contains("`acc_step` does not separate event `contact`"),
         "{stderr}"
     );
     assert!(!refused.exists());

@@ -103,7 +103,7 @@ fn saved_bytes_that_are_not_a_reachable_state_are_refused_naming_why() {
             .position(|f| f.as_str() == name)
             .expect("a feature of the default")
     };
-    let envelope = feature("acc_recent");
+    let envelope = feature("motion_ring");
     let mean = feature("stress_mean");
     let cases: Vec<(Vec<u8>, StateError)> = vec![
         (good[..100].to_vec(), StateError::Length(100)),

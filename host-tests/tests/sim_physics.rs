@@ -58,6 +58,25 @@ fn loop_stiffness(tr: &Trace) -> f64 {
     finger_mass(tr) * (std::f64::consts::TAU * param(tr, "plant.control_bandwidth")).powi(2)
 }
 
+/// The unit directions in which joint 1 and joint 2 move the tip in a run (the fingertip's
+/// frame, x the pad normal), from its posture as docs/simulator.md describes it.
+fn joint_directions(tr: &Trace) -> [[f64; 2]; 2] {
+    let (psi, flexion) = (param(tr, "plant.pad_angle"), param(tr, "plant.flexion"));
+    let (l1, l2) = (
+        param(tr, "plant.link1_length"),
+        param(tr, "plant.link2_length"),
+    );
+    let j2 = [l2 * psi.cos(), l2 * psi.sin()];
+    let j1 = [
+        j2[0] + l1 * (psi - flexion).cos(),
+        j2[1] + l1 * (psi - flexion).sin(),
+    ];
+    [j1, j2].map(|j| {
+        let n = j[0].hypot(j[1]);
+        [j[0] / n, j[1] / n]
+    })
+}
+
 fn onset_row(tr: &Trace) -> usize {
     tr.truth_onset().expect("the run has a truth onset").0
 }
@@ -70,10 +89,22 @@ const SEEDS: u64 = 40;
 /// strongest disturbances.
 const STRESS_QUIET: f64 = 15.0;
 
-/// Without contact the stress-rate film stays at its noise floor all run long.
+/// Without contact the stress-rate film reads no more than its noise floor and the inertia
+/// of the skin it carries: that mass (`film_share` x `skin_mass`) times the skin's jerk,
+/// which the accelerometer's sample-to-sample change bounds (its gain is at least 0.9;
+/// its noise and AC coupling only make that bound larger).
 fn assert_stress_quiet(tr: &Trace, what: &str) {
+    let film = param(tr, "plant.film_share") * param(tr, "plant.skin_mass");
+    let a = col(tr, "skin_accel");
+    let jerk = a
+        .windows(2)
+        .fold(0.0f64, |m, w| m.max((w[1] - w[0]).abs() * 5000.0 / 0.9));
     let sr = max_abs(col(tr, "stress_rate"));
-    assert!(sr < STRESS_QUIET, "{what}: stress rate {sr}");
+    let limit = STRESS_QUIET + film * jerk;
+    assert!(
+        sr < limit,
+        "{what}: stress rate {sr}, more than noise and the film's inertia ({limit})"
+    );
 }
 
 #[test]
@@ -197,7 +228,7 @@ fn hard_contact_rings_the_skin_at_impact() {
         let before = max_abs(&a[..on]);
         let after = max_abs(&a[on..on + 2 * MS]);
         assert!(
-            after > 10.0 * before.max(1.0),
+            after > 8.0 * before.max(1.0),
             "seed {seed}: {before} then {after}"
         );
     }
@@ -346,8 +377,9 @@ fn knocks_push_the_finger_off_its_path_and_leave_the_skin_untouched() {
 }
 
 /// A very soft object at 1 cm/s: the stress rate stays at its noise floor (the force builds
-/// at 0.4 to 1.2 N/s), but the force against the motion grows steadily: by 24 to 72 mN
-/// after 60 ms, more than the sensor's noise averaged over 10 ms.
+/// at 0.3 to 1.4 N/s), but the force against the motion grows steadily: by 18 to 86 mN
+/// after 60 ms, more than the sensor's noise averaged over 20 ms (a whole period of the
+/// mains hum, which the average nulls).
 #[test]
 fn very_soft_contact_builds_force_without_stress_rate() {
     for seed in 0..SEEDS {
@@ -355,9 +387,9 @@ fn very_soft_contact_builds_force_without_stress_rate() {
         let on = onset_row(&tr);
         let what = format!("seed {seed}");
         let f = col(&tr, "force_x");
-        let b = baseline(f, on);
-        let at_60 = mean(&f[on + 55 * MS..on + 65 * MS]) - b;
-        assert!(at_60 < -0.015, "{what}: force {at_60} N after 60 ms");
+        let b = mean(&f[on.saturating_sub(20 * MS)..on]);
+        let at_60 = mean(&f[on + 50 * MS..on + 70 * MS]) - b;
+        assert!(at_60 < -0.012, "{what}: force {at_60} N after 60 ms");
         assert_stress_quiet(&tr, &what);
     }
 }
@@ -381,11 +413,16 @@ fn braking_contact_happens_while_the_command_decelerates() {
 fn collision_stops_the_finger_while_the_command_goes_on() {
     let tr = run(Scenario::LinkCollision8, 1, false);
     let on = onset_row(&tr);
-    let e = col(&tr, "pos_err_x");
-    // 100 ms after the onset the arm has stood still: the error has grown by nearly the
-    // commanded travel (8 cm/s x 0.1 s = 8 mm), less the bounce.
-    let g = e[on + 100 * MS] - e[on];
-    assert!(g > 6e-3 && g < 8.5e-3, "{g}");
+    let (ex, ey) = (col(&tr, "pos_err_x"), col(&tr, "pos_err_y"));
+    // 100 ms after the onset joint 1 has stood still while joint 2 went on: the error has
+    // grown by joint 1's share of the commanded travel (8 cm/s x 0.1 s = 8 mm), less the
+    // bounce, and by less than the whole travel.
+    let share: f64 = tr.meta("link1_speed_share").unwrap().parse().unwrap();
+    let at = on + 100 * MS;
+    let g = (ex[at] - ex[on]).hypot(ey[at] - ey[on]);
+    let lost = share * 8e-3;
+    assert!(g > 0.85 * lost && g < 1.05 * lost, "{g} of {lost}");
+    assert!(share > 0.3 && share < 1.0, "{share}");
     // The first force swing is positive: the fingertip decelerates, force . velocity > 0.
     let f = &col(&tr, "force_x")[on..on + 10 * MS];
     let first_big = f.iter().find(|x| x.abs() > 0.2).unwrap();
@@ -492,11 +529,11 @@ fn truth_onset_is_the_physical_onset() {
             let onset: f64 = tr.meta(sim::META_ONSET).unwrap().parse().unwrap();
             let scheduled: f64 = tr.meta("scheduled_onset_s").unwrap().parse().unwrap();
             // The physical onset is where it was staged; the drive's ripple and friction
-            // move the tip by micrometres (up to 20 on the softest, 10 Hz, position loop),
-            // i.e. up to a millisecond at 2 cm/s. A nominal run is within an integration
-            // step or two.
+            // move the tip by micrometres (up to about 40 on the softest, 10 Hz, position
+            // loops, along the direction where they are half as stiff), i.e. up to two
+            // milliseconds at 2 cm/s. A nominal run is within an integration step or two.
             let internal: f64 = tr.meta("internal_rate_hz").unwrap().parse().unwrap();
-            let tol = if r { 1e-3 } else { 2.0 / internal };
+            let tol = if r { 2e-3 } else { 2.0 / internal };
             assert!(
                 (onset - scheduled).abs() < tol,
                 "{what}: {onset} vs {scheduled}"
@@ -586,9 +623,20 @@ fn friction_compensation_sets_the_cruising_error() {
         let tr = run(Scenario::ContactHard5, seed, true);
         let p = |k: &str| param(&tr, k);
         let kp = loop_stiffness(&tr);
-        let v = 0.05 * p("motion.speed_factor") * p("motion.approach_angle").cos();
-        let friction = p("plant.arm_coulomb_friction") + p("plant.arm_viscous_friction") * v;
-        let expected = (1.0 - p("plant.friction_compensation")) * friction / kp;
+        let speed = 0.05 * p("motion.speed_factor");
+        let angle = p("motion.approach_angle");
+        // The drive's friction left uncompensated, x and y (Coulomb regularized below
+        // 1 mm/s), held by the two joint loops: their stiffness at the tip is kp A, so the
+        // error is A^-1 F / kp, A^-1 = u1 u1^T + u2 u2^T (the Jacobian's unit columns).
+        let left = [angle.cos(), angle.sin()].map(|d| {
+            let v = speed * d;
+            let friction = p("plant.arm_coulomb_friction") * (v / 1e-3).clamp(-1.0, 1.0)
+                + p("plant.arm_viscous_friction") * v;
+            (1.0 - p("plant.friction_compensation")) * friction
+        });
+        let [u1, u2] = joint_directions(&tr);
+        let along = |u: [f64; 2]| u[0] * (u[0] * left[0] + u[1] * left[1]);
+        let expected = (along(u1) + along(u2)) / kp;
         let on = onset_row(&tr);
         let e = mean(&col(&tr, "pos_err_x")[..on]);
         assert!(
@@ -687,7 +735,8 @@ fn free_motion_changes_velocity_gently_while_moving() {
 /// The fingertip's suspension: after a sudden acceleration from standstill, a padded tip on
 /// soft foam rings at sqrt(foam stiffness / skin mass) / 2 pi (20 to 80 Hz), and the force
 /// sensor, which carries the foam's force, shows it: the strongest frequency of its
-/// reading over the next 150 ms, from 10 Hz to below the bending mode, is that mode's.
+/// reading over the next 150 ms, from twice the position loops' bandwidth (10 Hz at least)
+/// to below the bending mode, is that mode's.
 #[test]
 fn padded_tip_rings_at_its_suspension_mode() {
     let mut checked = 0;
@@ -696,13 +745,14 @@ fn padded_tip_rings_at_its_suspension_mode() {
         let p = |k: &str| param(&tr, k);
         let mode =
             (p("plant.foam_stiffness") / p("plant.skin_mass")).sqrt() / std::f64::consts::TAU;
-        // Well apart from the bending mode and from the position loop (whose bandwidth, up
-        // to 50 Hz, couples with a mode near it and pulls it).
+        // Well apart from the bending mode and from the position loops (whose bandwidth, up
+        // to 50 Hz and more along the direction the joints' inertia is lightest, couples
+        // with a mode near it and pulls it).
         // And a quiet mains: its hum (up to 3 LSB, 29 mN, at 50 Hz and its harmonics) would
         // outlast the mode's decay.
         if !(20.0..=80.0).contains(&mode)
             || p("plant.link_frequency") < 3.0 * mode
-            || p("plant.control_bandwidth") > 0.5 * mode
+            || p("plant.control_bandwidth") > 0.35 * mode
             || p("sensors.hum_lsb") > 0.75
         {
             continue;
@@ -723,9 +773,12 @@ fn padded_tip_rings_at_its_suspension_mode() {
             }
             c * c + s * s
         };
-        // Below the bending mode, which rings on the sensor too.
+        // Below the bending mode, which rings on the sensor too, and above the position
+        // loops, whose settling after a saturated acceleration (a finger near stretched
+        // is heavy along its length) shows on the sensor at their bandwidth.
         let top = (0.6 * p("plant.link_frequency")).min(150.0);
-        let strongest = (20..(2.0 * top) as usize)
+        let bottom = (4.0 * p("plant.control_bandwidth")).max(20.0) as usize;
+        let strongest = (bottom..(2.0 * top) as usize)
             .map(|k| k as f64 * 0.5)
             .max_by(|a, b| power(*a).total_cmp(&power(*b)))
             .unwrap_or(0.0);

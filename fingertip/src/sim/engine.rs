@@ -12,11 +12,21 @@
 //!                                          tap on the tip                          tilted surface)
 //! ```
 //!
-//! - `arm` (link 1): the proximal part of the finger, moved by a digital joint controller
-//!   (PD with an erring feedforward and partial friction compensation, at its own loop
-//!   rate, on the motor-side position quantized to the encoder resolution, its force
-//!   limited). The drive adds friction and a small force ripple whose frequency follows
-//!   the commanded speed.
+//! - `arm` (link 1): the proximal part of the finger, moved by two digital joint
+//!   controllers (PD with an erring feedforward and partial friction compensation, at
+//!   their own loop rate, on the motor-side position quantized to the encoder resolution,
+//!   their force limited). The drive adds friction and a small force ripple whose frequency
+//!   follows the commanded speed.
+//! - The two joints are linearized at the run's posture (a run moves the tip by a few
+//!   centimetres at most): the Jacobian's columns `J1`, `J2` (the tip's travel per radian
+//!   of each joint) are constant. Each joint's reflected inertia is the arm's mass times
+//!   `|Jj|^2`, and each joint's loop is tuned on its own inertia (the arm's and the
+//!   fingertip's at the tip, along that joint's direction): at the tip, the arm's mass
+//!   and the loops' stiffness and damping are that scalar times `A = J^-T diag(|Jj|^2)
+//!   J^-1`, the identity when the two columns are square. Joint torques become tip forces
+//!   through `J^-T`, so a force square to `J2` loads joint 1 alone: a link 1 collision
+//!   (an obstacle blocking joint 1) is a stiff wall for the arm along the unit normal to
+//!   `J2`, and the tip goes on along `J2` as joint 2's own loop drives it.
 //! - `distal` (link 2 and the fingertip's carrier): joined to link 1 by the distal
 //!   structure's compliance, its bending mode. A tap on the tip strikes the carrier, above
 //!   the force sensor.
@@ -33,9 +43,10 @@
 //!   sensor's mounting misalignment and cross-axis sensitivity.
 //! - Skin acceleration: the skin's acceleration along the accelerometer's (misaligned)
 //!   axis plus a cross-axis share, through a first-order AC coupling.
-//! - Stress rate: the rate of change of the contact force pressing the pad (its component
-//!   along the pad normal x), plus a small crosstalk from the rate of the foam force (film
-//!   bending), zero when nothing changes.
+//! - Stress rate: the rate of change of the load on the film: the contact force pressing
+//!   the pad (its component along the pad normal x) plus the inertia of the skin's share
+//!   above the film (that mass times the skin's acceleration along x), and a small
+//!   crosstalk from the rate of the foam force (film bending); zero when nothing changes.
 //! - Every analog channel then passes the 4th-order anti-alias filter at the internal rate
 //!   and is sampled at the detector rate by a 12-bit ADC with gain error, offset, drift,
 //!   mains hum with its harmonics and white noise, clipped at its full scale.
@@ -67,6 +78,124 @@ const FASTEST_APPROACH: f64 = 0.1;
 /// The largest step of a mode's phase per integration step (rad) that the internal rate
 /// allows: semi-implicit Euler then gets a mode's frequency right within 0.5 %.
 const MAX_PHASE_STEP: f64 = 0.35;
+
+/// A 2 x 2 matrix, by rows.
+type Mat2 = [[f64; 2]; 2];
+
+fn mul(m: &Mat2, v: [f64; 2]) -> [f64; 2] {
+    [
+        m[0][0] * v[0] + m[0][1] * v[1],
+        m[1][0] * v[0] + m[1][1] * v[1],
+    ]
+}
+
+fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+
+/// The finger's two joints, linearized at the run's posture, in the fingertip's frame (x
+/// the pad normal): the tip's travel per radian of each joint and the shape `A` their
+/// independent loops give the arm's inertia and stiffness at the tip (see the module's
+/// header).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Linkage {
+    /// The Jacobian's columns `J1`, `J2` (m/rad).
+    columns: [[f64; 2]; 2],
+    /// `A` and its inverse `A^-1 = u1 u1^T + u2 u2^T` (the columns' unit vectors).
+    shape: Mat2,
+    shape_inv: Mat2,
+}
+
+impl Linkage {
+    pub(crate) fn new(p: &Plant) -> Linkage {
+        // Joint 2 moves the tip square to link 2, at the pad angle from the pad normal;
+        // link 1 runs at the flexion from link 2, and joint 1 moves the tip by both links.
+        let psi = p.pad_angle;
+        let j2 = [p.link2_length * psi.cos(), p.link2_length * psi.sin()];
+        let toward = psi - p.flexion;
+        let j1 = [
+            j2[0] + p.link1_length * toward.cos(),
+            j2[1] + p.link1_length * toward.sin(),
+        ];
+        let unit = |c: [f64; 2]| {
+            let n = dot(c, c).sqrt();
+            [c[0] / n, c[1] / n]
+        };
+        let (u1, u2) = (unit(j1), unit(j2));
+        let shape_inv = [
+            [u1[0] * u1[0] + u2[0] * u2[0], u1[0] * u1[1] + u2[0] * u2[1]],
+            [u1[1] * u1[0] + u2[1] * u2[0], u1[1] * u1[1] + u2[1] * u2[1]],
+        ];
+        let det = shape_inv[0][0] * shape_inv[1][1] - shape_inv[0][1] * shape_inv[1][0];
+        let shape = [
+            [shape_inv[1][1] / det, -shape_inv[0][1] / det],
+            [-shape_inv[1][0] / det, shape_inv[0][0] / det],
+        ];
+        Linkage {
+            columns: [j1, j2],
+            shape,
+            shape_inv,
+        }
+    }
+
+    /// The joint rates (rad/s) that move the tip at `v` (m/s).
+    fn joint_rates(&self, v: [f64; 2]) -> [f64; 2] {
+        let [j1, j2] = self.columns;
+        let det = j1[0] * j2[1] - j2[0] * j1[1];
+        [
+            (j2[1] * v[0] - j2[0] * v[1]) / det,
+            (j1[0] * v[1] - j1[1] * v[0]) / det,
+        ]
+    }
+
+    /// The tip velocity joint 1 contributes while the tip moves at `v` (m/s): what a link 1
+    /// collision takes away from the tip's motion.
+    pub(crate) fn joint1_share(&self, v: [f64; 2]) -> [f64; 2] {
+        let q1 = self.joint_rates(v)[0];
+        self.columns[0].map(|c| c * q1)
+    }
+
+    /// The unit normal, square to `J2`, along which a link 1 obstacle blocks the tip while
+    /// it moves at `v`: pointing the way joint 1 moves it (x when joint 1 does not move).
+    pub(crate) fn joint1_normal(&self, v: [f64; 2]) -> [f64; 2] {
+        let j2 = self.columns[1];
+        let n = dot(j2, j2).sqrt();
+        let normal = [j2[1] / n, -j2[0] / n];
+        let along = dot(normal, self.joint1_share(v));
+        if along > 0.0 {
+            normal
+        } else if along < 0.0 {
+            normal.map(|c| -c)
+        } else {
+            [1.0, 0.0]
+        }
+    }
+
+    /// The tip force `f` (N) limited as the joints' torques are: each joint's torque
+    /// `Jj . f` to what makes `limit` (N) along that joint's own direction, `limit |Jj|`.
+    fn limit_torques(&self, f: [f64; 2], limit: f64) -> [f64; 2] {
+        let [j1, j2] = self.columns;
+        let t: [f64; 2] = std::array::from_fn(|j| {
+            let c = self.columns[j];
+            let most = limit * dot(c, c).sqrt();
+            dot(c, f).clamp(-most, most)
+        });
+        // The tip force those torques make: J^T f = t.
+        let det = j1[0] * j2[1] - j1[1] * j2[0];
+        [
+            (t[0] * j2[1] - t[1] * j1[1]) / det,
+            (j1[0] * t[1] - j2[0] * t[0]) / det,
+        ]
+    }
+
+    /// The smallest eigenvalue of `A` (0.5 to 1): the arm is lightest, for its mass, along
+    /// that direction.
+    fn lightest(&self) -> f64 {
+        let [j1, j2] = self.columns;
+        let cos = dot(j1, j2) / (dot(j1, j1) * dot(j2, j2)).sqrt();
+        1.0 / (1.0 + cos.abs())
+    }
+}
 
 /// How the normal force of a contact grows with depth.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -127,10 +256,15 @@ impl Struck {
     }
 }
 
-/// The obstacle a link can strike along x.
+/// The obstacle a link can strike.
 #[derive(Clone, Debug)]
 pub(crate) struct ObstacleSetup {
-    /// Position of the obstacle along x, from the struck body's position at time zero.
+    /// The unit normal of the wall it makes for the struck body, in the fingertip's frame:
+    /// x for link 2; for link 1, the direction of the tip's motion that joint 1 alone
+    /// makes ([`Linkage::joint1_normal`]).
+    pub normal: [f64; 2],
+    /// Position of the obstacle along `normal`, from the struck body's position at time
+    /// zero.
     pub position: f64,
     pub stiffness: f64,
     pub damping: f64,
@@ -206,14 +340,20 @@ pub(crate) fn required_rate(
     let contact = object.map_or(0.0, |o| {
         o.law.tangent_stiffness(pressing) + p.tangential_stiffness
     });
+    // The bending mode is tuned on the arm's mass; along the direction the arm is
+    // lightest, it rings faster.
+    let m_tip = distal + p.skin_mass;
+    let reduced = |arm: f64| arm * m_tip / (arm + m_tip);
+    let light = reduced(p.arm_mass * Linkage::new(p).lightest());
     let mut omega = [
         ((p.foam_stiffness + contact) / p.skin_mass).sqrt(),
-        TAU * p.link_frequency,
+        TAU * p.link_frequency * (reduced(p.arm_mass) / light).sqrt(),
     ]
     .into_iter()
     .fold(0.0, f64::max);
     let mut rate: f64 = MIN_INTERNAL_RATE_HZ;
     if let Some(o) = obstacle {
+        // The arm weighs at least its mass along any wall's normal.
         let m = match o.body {
             Struck::Link1 => p.arm_mass,
             _ => distal,
@@ -387,6 +527,9 @@ struct Bodies {
 /// The chain's coefficients, derived once from the plant's parameters.
 struct Chain {
     arm_mass: f64,
+    /// The arm's inverse mass at the tip, `A^-1 / arm_mass` (1/kg).
+    arm_inv_mass: Mat2,
+    linkage: Linkage,
     /// Link 2 and the carrier, rigid through the stiff force sensor.
     distal_mass: f64,
     skin_mass: f64,
@@ -412,8 +555,11 @@ impl Chain {
         // The bending mode: link 1 against link 2, fingertip and skin.
         let mu = ma * m_tip / m_tot;
         let wl = TAU * p.link_frequency;
+        let linkage = Linkage::new(p);
         Chain {
             arm_mass: ma,
+            arm_inv_mass: linkage.shape_inv.map(|row| row.map(|a| a / ma)),
+            linkage,
             distal_mass: md,
             skin_mass: ms,
             total_mass: m_tot,
@@ -432,14 +578,18 @@ impl Chain {
     }
 }
 
-/// The digital joint controller: a PD law on the motor-side position with feedforward of
-/// the commanded acceleration (through an erring mass model) and of part of the friction,
-/// run at its loop rate, its force limited and held between ticks.
+/// The digital joint controllers, seen at the tip: each joint's PD law on its motor-side
+/// position, tuned on that joint's inertia, with feedforward of the commanded acceleration
+/// (through an erring model of the joints' inertia) and of part of the friction, run at
+/// their loop rate, their force limited and held between ticks.
 struct Controller {
-    /// The mass the feedforward assumes.
-    model_mass: f64,
+    /// The inertia the feedforward assumes, at the tip (kg).
+    model_mass: Mat2,
+    /// The loops' stiffness and damping at the tip: these scalars times `A`.
     kp: f64,
     kd: f64,
+    shape: Mat2,
+    linkage: Linkage,
     /// The compensated Coulomb and viscous friction.
     compensation: (f64, f64),
     limit: f64,
@@ -457,10 +607,20 @@ impl Controller {
         let m = chain.total_mass;
         let wc = TAU * p.control_bandwidth;
         let share = p.friction_compensation;
+        let (shape, m_tip) = (chain.linkage.shape, m - chain.arm_mass);
+        let err = 1.0 + p.feedforward_error;
+        let model_mass = std::array::from_fn(|r| {
+            std::array::from_fn(|c| {
+                let own = if r == c { m_tip } else { 0.0 };
+                err * (chain.arm_mass * shape[r][c] + own)
+            })
+        });
         Controller {
-            model_mass: m * (1.0 + p.feedforward_error),
+            model_mass,
             kp: m * wc * wc,
             kd: 2.0 * p.control_damping_ratio * m * wc,
+            shape,
+            linkage: chain.linkage,
             compensation: (share * chain.coulomb, share * chain.viscous),
             limit: p.force_limit,
             rate: p.control_rate,
@@ -489,13 +649,13 @@ impl Controller {
             return;
         }
         let cmd = trajectory.at_time(self.tick as f64 / self.rate);
-        self.force = std::array::from_fn(|k| {
-            let f = self.model_mass * cmd.a[k]
-                + self.compensated(cmd.v[k])
-                + self.kp * (cmd.p[k] - encoder(b.xa[k]))
-                + self.kd * (cmd.v[k] - b.va[k]);
-            f.clamp(-self.limit, self.limit)
+        let pd: [f64; 2] = std::array::from_fn(|k| {
+            self.kp * (cmd.p[k] - encoder(b.xa[k])) + self.kd * (cmd.v[k] - b.va[k])
         });
+        let pd = mul(&self.shape, pd);
+        let ff = mul(&self.model_mass, cmd.a);
+        let f = std::array::from_fn(|k| ff[k] + self.compensated(cmd.v[k]) + pd[k]);
+        self.force = self.linkage.limit_torques(f, self.limit);
         ripple.follow(cmd.v);
         self.tick += 1;
         self.next_step = step_at(self.tick as f64 / self.rate, self.internal_rate);
@@ -611,7 +771,7 @@ fn hunt_crossley(stiffness: f64, damping: f64, depth: f64, velocity: f64) -> f64
     }
 }
 
-/// The obstacle a link strikes along x.
+/// The obstacle a link strikes.
 struct Obstacle<'a> {
     setup: &'a ObstacleSetup,
     /// Its position in the struck body's coordinates.
@@ -619,11 +779,13 @@ struct Obstacle<'a> {
 }
 
 impl Obstacle<'_> {
-    /// The force pushing the struck body back, from its x position and velocity.
+    /// The force pushing the struck body back along the wall's normal, from its position
+    /// and velocity.
     fn force(&self, b: &Bodies) -> f64 {
+        let n = self.setup.normal;
         let (x, v) = match self.setup.body {
-            Struck::Link1 => (b.xa[0], b.va[0]),
-            _ => (b.xd[0], b.vd[0]),
+            Struck::Link1 => (dot(n, b.xa), dot(n, b.va)),
+            _ => (dot(n, b.xd), dot(n, b.vd)),
         };
         hunt_crossley(
             self.setup.stiffness,
@@ -807,6 +969,8 @@ struct SensorChain {
     accel_axis: (f64, f64),
     accel_cross: f64,
     stress_crosstalk: f64,
+    /// The skin's mass above the stress-rate film (kg).
+    film_mass: f64,
     internal_rate: f64,
     rate_hz: f64,
     oversampling: usize,
@@ -816,7 +980,8 @@ struct SensorChain {
     adc: [Adc; 4],
     /// The mains phase, advanced once per output sample.
     mains: Phasor,
-    /// The pressing force and the foam's x force at the previous step.
+    /// The film's load (the pressing force and its mass's inertia) and the foam's x force
+    /// at the previous step.
     previous: (f64, f64),
     /// Integration steps until the next sample.
     until_sample: usize,
@@ -824,7 +989,13 @@ struct SensorChain {
 
 impl SensorChain {
     /// Draws the hum's phases on each channel from `noise`.
-    fn new<R: Rng>(s: &Sensors, rate_hz: f64, oversampling: usize, noise: &mut R) -> SensorChain {
+    fn new<R: Rng>(
+        s: &Sensors,
+        film_mass: f64,
+        rate_hz: f64,
+        oversampling: usize,
+        noise: &mut R,
+    ) -> SensorChain {
         let internal_rate = rate_hz * oversampling as f64;
         let adc = [
             Adc::new(
@@ -855,6 +1026,7 @@ impl SensorChain {
             accel_axis: (ac, as_),
             accel_cross: s.accel_cross_axis,
             stress_crosstalk: s.stress_crosstalk,
+            film_mass,
             internal_rate,
             rate_hz,
             oversampling,
@@ -877,10 +1049,11 @@ impl SensorChain {
         let along = ac * sx + as_ * sy;
         let across = ac * sy - as_ * sx;
         let accel = self.highpass.process(along + self.accel_cross * across);
-        let (prev_p, prev_f) = self.previous;
-        let stress = ((ph.pressing - prev_p) + self.stress_crosstalk * (ph.foam - prev_f))
-            * self.internal_rate;
-        self.previous = (ph.pressing, ph.foam);
+        let (prev_load, prev_f) = self.previous;
+        let load = ph.pressing + self.film_mass * sx;
+        let stress =
+            ((load - prev_load) + self.stress_crosstalk * (ph.foam - prev_f)) * self.internal_rate;
+        self.previous = (load, ph.foam);
         [
             fx + self.force_cross[0] * fy,
             fy + self.force_cross[1] * fx,
@@ -938,15 +1111,21 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         in_flight: VecDeque::new(),
         received: [0.0; 6],
     };
-    let mut sensors = SensorChain::new(&setup.sensors, setup.rate_hz, n_over, noise);
+    let mut sensors = SensorChain::new(
+        &setup.sensors,
+        p.film_share * p.skin_mass,
+        setup.rate_hz,
+        n_over,
+        noise,
+    );
 
     // Initial state: steady motion at the commanded initial velocity, all springs relaxed,
     // the whole finger lagging the command by the position error that balances the
     // friction the controller leaves uncompensated.
     let c0 = setup.trajectory.at(0);
-    let lag: [f64; 2] = std::array::from_fn(|k| {
-        (chain.friction(c0.v[k]) - controller.compensated(c0.v[k])) / controller.kp
-    });
+    let left: [f64; 2] =
+        std::array::from_fn(|k| chain.friction(c0.v[k]) - controller.compensated(c0.v[k]));
+    let lag = mul(&chain.linkage.shape_inv, left).map(|f| f / controller.kp);
     let start: [f64; 2] = std::array::from_fn(|k| -lag[k]);
     let mut b = Bodies {
         xa: start,
@@ -963,7 +1142,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let mut contact = setup.object.as_ref().map(|o| Contact::new(o, b.xs, dt));
     let obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
         setup: o,
-        position: o.position + start[0],
+        position: o.position + dot(o.normal, start),
     });
     let mut disturbance = setup.disturbance.as_ref().map(|d| Disturbance::new(d, dt));
     let mut ripple = DriveRipple {
@@ -973,11 +1152,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         phasor: Phasor::new(0.0, 0.0),
         direction: [0.0; 2],
     };
-    let (inv_ma, inv_md, ms) = (
-        1.0 / chain.arm_mass,
-        1.0 / chain.distal_mass,
-        chain.skin_mass,
-    );
+    let (inv_ma, inv_md, ms) = (chain.arm_inv_mass, 1.0 / chain.distal_mass, chain.skin_mass);
     let inv_ms = 1.0 / ms;
     let carrier = p.carrier_mass;
 
@@ -1013,9 +1188,12 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let f_ob = match obstacle.as_ref() {
             Some(o) => {
                 let f = o.force(&b);
-                match o.setup.body {
-                    Struck::Link1 => on_arm[0] -= f,
-                    _ => on_distal[0] -= f,
+                let on = match o.setup.body {
+                    Struck::Link1 => &mut on_arm,
+                    _ => &mut on_distal,
+                };
+                for (v, n) in on.iter_mut().zip(o.setup.normal) {
+                    *v -= f * n;
                 }
                 f
             }
@@ -1029,10 +1207,11 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let foam: [f64; 2] = std::array::from_fn(|k| {
             chain.foam_k[k] * (b.xd[k] - b.xs[k]) + chain.foam_c[k] * (b.vd[k] - b.vs[k])
         });
-        let a_arm: [f64; 2] = std::array::from_fn(|k| {
+        let on_arm_total: [f64; 2] = std::array::from_fn(|k| {
             let drive = controller.force[k] + ripple_force[k] - chain.friction(b.va[k]);
-            (drive - link[k] + on_arm[k]) * inv_ma
+            drive - link[k] + on_arm[k]
         });
+        let a_arm = mul(&inv_ma, on_arm_total);
         let a_d: [f64; 2] =
             std::array::from_fn(|k| (link[k] - foam[k] + on_distal[k] + on_tip[k]) * inv_md);
         // The skin: foam and friction explicit, the contact's normal force implicit in its
@@ -1227,6 +1406,68 @@ mod tests {
         }
     }
 
+    /// The linkage at a posture: joint 1's share and joint 2's make up the tip's velocity,
+    /// joint 2's along `J2`; the wall a blocked joint 1 makes is square to `J2` and faces
+    /// joint 1's motion; A is the identity for square columns and heavier than 1 along
+    /// the finger as it stretches.
+    #[test]
+    fn linkage_splits_the_motion_between_the_joints() {
+        let p = Plant::nominal();
+        let l = Linkage::new(&p);
+        let v = [0.08, 0.01];
+        let lost = l.joint1_share(v);
+        let kept = [v[0] - lost[0], v[1] - lost[1]];
+        let j2 = l.columns[1];
+        assert!(
+            (kept[0] * j2[1] - kept[1] * j2[0]).abs() < 1e-12,
+            "kept along J2"
+        );
+        let n = l.joint1_normal(v);
+        assert!(dot(n, j2).abs() < 1e-12 && (dot(n, n) - 1.0).abs() < 1e-12);
+        assert!(dot(n, lost) > 0.0);
+        // A^-1 A = I.
+        for r in 0..2 {
+            for c in 0..2 {
+                let e: f64 = (0..2).map(|k| l.shape_inv[r][k] * l.shape[k][c]).sum();
+                assert!((e - f64::from(u8::from(r == c))).abs() < 1e-12);
+            }
+        }
+        let mut q = Plant::nominal();
+        // Square columns: J1 = J2 + l1 (cos(psi - q2), sin(psi - q2)) with J1 . J2 = 0.
+        q.pad_angle = 0.0;
+        q.link2_length = 0.03;
+        q.link1_length = 0.06;
+        q.flexion = std::f64::consts::PI - 0.5f64.acos();
+        let sq = Linkage::new(&q);
+        assert!(dot(sq.columns[0], sq.columns[1]).abs() < 1e-12);
+        assert!((sq.shape[0][0] - 1.0).abs() < 1e-12 && sq.shape[0][1].abs() < 1e-12);
+        assert!((sq.lightest() - 1.0).abs() < 1e-12);
+        assert!(l.lightest() < 1.0);
+    }
+
+    /// The film reads the inertia of the skin above it: that mass times the rate of the
+    /// skin's acceleration along x.
+    #[test]
+    fn film_reads_the_inertia_it_carries() {
+        let s = Sensors::nominal();
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1);
+        let mut chain = SensorChain::new(&s, 0.004, 5000.0, 4, &mut rng);
+        let at = |a: f64| Physical {
+            load: [0.0; 2],
+            skin: [a, 3.0],
+            pressing: 0.0,
+            foam: 0.0,
+        };
+        chain.transduce(&at(0.0));
+        let analog = chain.transduce(&at(2.0));
+        // 4 g x 2 m/s^2 over one step at 20 kHz.
+        assert!(
+            (analog[3] - 0.004 * 2.0 * 20_000.0).abs() < 1e-9,
+            "{}",
+            analog[3]
+        );
+    }
+
     /// The controller's force: feedforward through its erring mass model, the compensated
     /// share of friction, PD, limited.
     #[test]
@@ -1255,13 +1496,17 @@ mod tests {
             direction: [0.0; 2],
         };
         c.update(0, &mut tr, &b, &mut ripple);
-        let expected = 1.1 * chain.total_mass * 1.0
-            + 0.5 * (p.arm_coulomb_friction + p.arm_viscous_friction * 0.02);
+        // The joints' inertia at the tip: the arm's shaped by A, the fingertip's point mass.
+        let shape = chain.linkage.shape;
+        let m_tip = chain.total_mass - chain.arm_mass;
+        let inertia = |k: usize| 1.1 * (chain.arm_mass * shape[k][0] + [m_tip, 0.0][k]);
+        let expected = inertia(0) + 0.5 * (p.arm_coulomb_friction + p.arm_viscous_friction * 0.02);
         assert!(
             (c.force[0] - expected).abs() < 1e-12,
             "{} vs {expected}",
             c.force[0]
         );
+        assert!((c.force[1] - inertia(1)).abs() < 1e-12, "{}", c.force[1]);
         // Far behind its command, it pushes at its limit only.
         let behind = Bodies {
             xa: [-0.01, 0.0],
@@ -1269,7 +1514,13 @@ mod tests {
         };
         c.next_step = 1;
         c.update(1, &mut tr, &behind, &mut ripple);
-        assert_eq!(c.force[0], 3.0);
+        // ... each joint's torque at what makes the limit along its own direction.
+        for j in chain.linkage.columns {
+            let n = dot(j, j).sqrt();
+            let along = dot(j, c.force) / n;
+            assert!((along.abs() - 3.0).abs() < 1e-9, "{along}");
+        }
+        assert!(c.force[0] > 0.0);
     }
 
     /// The force sensor turned by its misalignment and crossed by its cross-axis
@@ -1283,7 +1534,7 @@ mod tests {
         s.accel_cross_axis = 0.0;
         s.accel_highpass = 0.001;
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1);
-        let mut chain = SensorChain::new(&s, 5000.0, 4, &mut rng);
+        let mut chain = SensorChain::new(&s, 0.0, 5000.0, 4, &mut rng);
         let analog = chain.transduce(&Physical {
             load: [1.0, 0.0],
             skin: [0.0, 10.0],

@@ -24,8 +24,8 @@ mod trajectory;
 
 use crate::trace::{Labels, Trace, TraceError};
 use engine::{
-    ContactLaw, DisturbanceKind, DisturbanceSetup, Happened, ObjectSetup, ObstacleSetup, Setup,
-    Struck,
+    ContactLaw, DisturbanceKind, DisturbanceSetup, Happened, Linkage, ObjectSetup, ObstacleSetup,
+    Setup, Struck,
 };
 use params::{
     Braking, FirmSoftObject, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle,
@@ -753,7 +753,15 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     values.extend(sensors.values());
     let scene = match scenario.kind() {
         Kind::Free => free_motion_scene(opts, &mut traj_rng),
-        kind => approach_scene(scenario, kind, opts, &mut prng, &mut values, &mut meta),
+        kind => approach_scene(
+            scenario,
+            kind,
+            opts,
+            &plant,
+            &mut prng,
+            &mut values,
+            &mut meta,
+        ),
     };
 
     let duration = opts.duration_s.unwrap_or(scene.default_duration);
@@ -843,6 +851,7 @@ fn approach_scene(
     scenario: Scenario,
     kind: Kind,
     opts: &SimOptions,
+    plant: &Plant,
     prng: &mut Xoshiro256PlusPlus,
     values: &mut Vec<(String, f64)>,
     meta: &mut Vec<(String, String)>,
@@ -878,8 +887,21 @@ fn approach_scene(
                 Struck::Link1
             };
             meta.push(("struck_link".into(), body.name().into()));
+            // Link 2 meets the obstacle along the approach; link 1 where joint 1 moves
+            // the tip, and the tip loses joint 1's share of its velocity.
+            let normal = match body {
+                Struck::Link1 => {
+                    let linkage = Linkage::new(plant);
+                    let lost = linkage.joint1_share(v0);
+                    let share = (lost[0].hypot(lost[1]) / speed * 1e4).round() / 1e4;
+                    meta.push(("link1_speed_share".into(), fmt_f64(share)));
+                    linkage.joint1_normal(v0)
+                }
+                _ => [1.0, 0.0],
+            };
             scene.obstacle = Some(ObstacleSetup {
-                position: v0[0] * onset,
+                normal,
+                position: (v0[0] * normal[0] + v0[1] * normal[1]) * onset,
                 stiffness: o.stiffness,
                 damping: o.damping,
                 body,
