@@ -1296,7 +1296,7 @@ mod tests {
 
     #[test]
     fn the_default_detector_reads_each_channel_in_its_working_unit() {
-        // configs/approach.toml works in cN, mm and mm/s: the board converts the
+        // configs/approach.toml works in cN, µm and mm/s: the board converts the
         // calibrated newtons and the frames' raw steps to those in one rounding, as the
         // PC's replay converts a trace's SI values.
         let d = embedded();
@@ -1315,9 +1315,10 @@ mod tests {
         assert_eq!(at("vel_des_x").to_f64(), 50.0, "mm/s");
         assert_eq!(
             at("pos_err_x"),
-            Signal::from_f64(0.012),
-            "12 µm as mm, to the nearest step: no coarser than the frame's 1 µm"
+            d.sample_from_si(d.channel("pos_err_x").unwrap(), 12e-6),
+            "12 µm in the detector's unit: no coarser than the frame's 1 µm"
         );
+        assert_eq!(at("pos_err_x").to_f64(), 12.0, "micrometres");
     }
 
     #[test]

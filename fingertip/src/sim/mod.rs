@@ -468,7 +468,8 @@ const DISTURBANCE_CATEGORIES: &[&str] = &[
 impl Scenario {
     /// The parameter that matters most for detecting this scenario's event and its bins:
     /// object stiffness for contacts (mass for a movable object), the struck link for
-    /// collisions (plotted against speed), tap or burst and the body struck for
+    /// collisions and, for link 1, the share of the commanded speed the obstacle takes
+    /// (plotted against that share, the whole speed for link 2), tap or burst and the body struck for
     /// disturbances (size and kind at 2 cm/s, kind for knocks; plotted against the peak
     /// force), the acceleration for sudden accelerations. `None` for free motion.
     pub fn binning(self) -> Option<Binning> {
@@ -498,7 +499,12 @@ impl Scenario {
                 edges("object mass", "kg", true, &[0.05, 0.1, 0.2, 0.5])
             }
             Kind::BrakingContact => edges(STIFFNESS, "N/m", true, &[1e3, 3e3, 3.16e4, 1e5]),
-            Kind::Collision => categories("speed", "m/s", false, &["link1", "link2"]),
+            Kind::Collision => categories(
+                "share of the commanded speed the obstacle takes",
+                "1",
+                false,
+                &["link1, < 50 %", "link1, > 50 %", "link2"],
+            ),
             Kind::Disturbance(Size::Either) => categories(
                 PEAK,
                 "N",
@@ -552,7 +558,11 @@ impl Scenario {
             Kind::BrakingContact => {
                 param("hard_object.stiffness").or_else(|| param("firm_soft_object.stiffness"))
             }
-            Kind::Collision => param("motion.speed_factor").map(|f| f * self.nominal_speed()),
+            // A link 2 obstacle stops the tip: the whole speed.
+            Kind::Collision => match trace.meta("struck_link")? {
+                "link1" => trace.meta("link1_speed_share")?.parse().ok(),
+                _ => Some(1.0),
+            },
             Kind::Disturbance(_) => peak(&format!("{}_disturbance", size()?)),
             Kind::Knock(_) => peak("knock"),
             Kind::SuddenAccel => param("sudden_accel.amplitude"),
@@ -566,7 +576,12 @@ impl Scenario {
             Split::Categories(names) => {
                 let kind = || tap().map(|t| if t { "tap" } else { "burst" });
                 let name = match self.kind() {
-                    Kind::Collision => trace.meta("struck_link")?.to_string(),
+                    Kind::Collision => match trace.meta("struck_link")? {
+                        "link1" if value < 0.5 => "link1, < 50 %",
+                        "link1" => "link1, > 50 %",
+                        link => link,
+                    }
+                    .to_string(),
                     Kind::Disturbance(Size::Either) => format!("{} {}", size()?, kind()?),
                     Kind::Disturbance(_) => {
                         format!("{} on {}", kind()?, trace.meta("disturbance_body")?)
