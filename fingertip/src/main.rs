@@ -1141,10 +1141,11 @@ fn ask<L: fingertip::can_tools::service::Link>(
     node: NodeId,
     request: &fingertip_can::service::Request<'_>,
 ) -> Result<fingertip_can::service::Response> {
-    match client.request(request)? {
-        fingertip_can::service::Response::Error(code, text) => Err(refused(node, code, &text)),
-        r => Ok(r),
-    }
+    use fingertip::can_tools::service::ClientError;
+    client.ask(request).map_err(|e| match e {
+        ClientError::Refused { code, text } => refused(node, code, &text),
+        e => e.into(),
+    })
 }
 
 /// Runs `writes` in the fingertip's service state, and leaves it whatever they did.

@@ -88,12 +88,12 @@ pub struct Recorder {
     segments: [Segment; SEGMENTS],
     /// The segment being filled.
     current: usize,
-    /// Segments of the run kept, the current one included (0 before the first).
+    /// Segments of the run kept, the current one included (0 before the first): a run is
+    /// going on while some are and it is not frozen.
     kept: usize,
-    /// A run is going on: the next row is tick `next`'s.
-    recording: bool,
     /// Stopped; kept until re-armed.
     frozen: bool,
+    /// The tick the run's next row is.
     next: Tick,
     crc: u32,
     generation: u32,
@@ -103,32 +103,26 @@ pub struct Recorder {
     segment_rows: u16,
     /// The withheld channels at the last tick (a fault's onset triggers).
     last_faults: u32,
-    /// The trigger (see [`Trigger`]) and its tick.
     trigger: Trigger,
-    trigger_tick: Tick,
 }
 
-/// What armed the freeze, in a form whose "nothing" is zero.
+/// What armed the freeze, and when, in a form whose "nothing" is zero.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Trigger {
     /// 0 none, 1 a confirmation, 2 a fault.
     kind: u8,
     /// The event's index, or the channels that went bad.
     value: u16,
+    /// Its tick.
+    tick: Tick,
 }
 
 impl Trigger {
-    const NONE: Trigger = Trigger { kind: 0, value: 0 };
-
-    fn of(cause: RecordingCause) -> Trigger {
-        match cause {
-            RecordingCause::Confirmed(e) => Trigger {
-                kind: 1,
-                value: u16::from(e),
-            },
-            RecordingCause::Fault(m) => Trigger { kind: 2, value: m },
-        }
-    }
+    const NONE: Trigger = Trigger {
+        kind: 0,
+        value: 0,
+        tick: 0,
+    };
 
     fn cause(self) -> Option<RecordingCause> {
         match self.kind {
@@ -152,7 +146,6 @@ impl Recorder {
             segments: [Segment::EMPTY, Segment::EMPTY, Segment::EMPTY],
             current: 0,
             kept: 0,
-            recording: false,
             frozen: false,
             next: 0,
             crc: 0,
@@ -162,7 +155,6 @@ impl Recorder {
             segment_rows: 0,
             last_faults: 0,
             trigger: Trigger::NONE,
-            trigger_tick: 0,
         }
     }
 
@@ -178,15 +170,13 @@ impl Recorder {
         if self.frozen {
             return;
         }
-        let continues = self.recording
-            && self.next == t.now
-            && t.generation == self.generation
-            && t.crc == self.crc;
+        let recording = self.kept > 0;
+        let continues =
+            recording && self.next == t.now && t.generation == self.generation && t.crc == self.crc;
         if !continues {
-            if self.recording && self.trigger != Trigger::NONE {
+            if recording && self.trigger != Trigger::NONE {
                 // The run ends before its freeze: what it holds around the trigger is kept.
                 self.frozen = true;
-                self.recording = false;
             } else {
                 self.begin(t);
             }
@@ -195,24 +185,26 @@ impl Recorder {
         self.put_row(t);
         let faults = t.inputs.faults;
         if self.trigger == Trigger::NONE {
-            let cause = if t.confirmed != 0 {
-                Some(RecordingCause::Confirmed(t.confirmed.trailing_zeros() as u8))
+            let (kind, value) = if t.confirmed != 0 {
+                (1, t.confirmed.trailing_zeros() as u16)
             } else if faults != 0 && self.last_faults == 0 {
-                Some(RecordingCause::Fault(faults as u16))
+                (2, faults as u16)
             } else {
-                None
+                (0, 0)
             };
-            if let Some(c) = cause {
-                self.trigger = Trigger::of(c);
-                self.trigger_tick = t.now;
+            if kind != 0 {
+                self.trigger = Trigger {
+                    kind,
+                    value,
+                    tick: t.now,
+                };
             }
         }
         self.last_faults = faults;
         if self.trigger != Trigger::NONE
-            && t.now.wrapping_sub(self.trigger_tick) >= self.rate_hz * AFTER_MS / 1000
+            && t.now.wrapping_sub(self.trigger.tick) >= self.rate_hz * AFTER_MS / 1000
         {
             self.frozen = true;
-            self.recording = false;
             return;
         }
         self.next = t.now.wrapping_add(1);
@@ -238,7 +230,6 @@ impl Recorder {
         self.current = 0;
         self.kept = 1;
         self.open_segment(t);
-        self.recording = true;
         self.next = t.now.wrapping_add(1);
     }
 
@@ -280,11 +271,7 @@ impl Recorder {
         RecordingInfo {
             frozen: self.frozen,
             cause: self.trigger.cause(),
-            trigger_tick: if self.trigger == Trigger::NONE {
-                0
-            } else {
-                self.trigger_tick
-            },
+            trigger_tick: self.trigger.tick,
             first_tick: self.kept_segments().next().map_or(0, |s| s.start),
             rows,
             channels: self.channels,
@@ -333,7 +320,6 @@ impl Recorder {
     /// Drops what is held and records again from the next tick.
     pub fn rearm(&mut self) {
         self.frozen = false;
-        self.recording = false;
         self.kept = 0;
         self.trigger = Trigger::NONE;
     }
@@ -386,17 +372,21 @@ mod tests {
         detector_build::build(&config).expect("builds")
     }
 
-    /// Records ticks `from..to` with tick `k`'s force sample `k`, confirming at
-    /// `confirm_at` and withholding channel 2 from `fault_at` on.
-    fn feed(
+    /// Records ticks `from..to` with tick `k`'s force sample `k` and the channels `faults`
+    /// withheld, confirming at `confirm_at`.
+    fn feed_withheld(
         r: &mut Recorder,
         state: &State,
         ticks: core::ops::Range<Tick>,
         confirm_at: Option<Tick>,
         generation: u32,
+        faults: u32,
     ) {
         for k in ticks {
-            let mut inputs = Inputs::default();
+            let mut inputs = Inputs {
+                faults,
+                ..Inputs::default()
+            };
             inputs.samples[0] = Signal::from_bits(k as i32);
             r.record(Some(&Ticked {
                 now: k,
@@ -409,6 +399,17 @@ mod tests {
                 confirmed: if confirm_at == Some(k) { 0b100 } else { 0 },
             }));
         }
+    }
+
+    /// [`feed_withheld`] with every channel fed.
+    fn feed(
+        r: &mut Recorder,
+        state: &State,
+        ticks: core::ops::Range<Tick>,
+        confirm_at: Option<Tick>,
+        generation: u32,
+    ) {
+        feed_withheld(r, state, ticks, confirm_at, generation, 0);
     }
 
     fn first_samples(r: &Recorder) -> std::vec::Vec<i32> {
@@ -480,22 +481,7 @@ mod tests {
         // Another detector generation.
         feed(&mut r, &state, 500..600, None, 1);
         assert_eq!(r.info().first_tick, 501);
-        let inputs = Inputs {
-            faults: 1 << 2,
-            ..Inputs::default()
-        };
-        for k in 600..900 {
-            r.record(Some(&Ticked {
-                now: k,
-                rate_hz: 5000,
-                crc: 0xABCD,
-                generation: 1,
-                channels: 10,
-                inputs: &inputs,
-                state: &state,
-                confirmed: 0,
-            }));
-        }
+        feed_withheld(&mut r, &state, 600..900, None, 1, 1 << 2);
         let info = r.info();
         assert!(info.frozen);
         assert_eq!(info.cause, Some(RecordingCause::Fault(1 << 2)));

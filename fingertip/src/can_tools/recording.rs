@@ -12,7 +12,7 @@
 //! [`crate::replay`] starts where the chip did.
 
 use detector_core::{Detector, State};
-use fingertip_can::service::{ErrorCode, RecordingCause, RecordingInfo, Request, Response};
+use fingertip_can::service::{RecordingCause, RecordingInfo, Request, Response};
 
 use super::service::{Client, ClientError, Link};
 use crate::replay::{DecisionRecord, FIRST_TICK_KEY, STATE_KEY, WITHHELD_COLUMN};
@@ -49,14 +49,6 @@ pub enum RecordingError {
     /// The exchange failed.
     #[error(transparent)]
     Client(#[from] ClientError),
-    /// The fingertip refused a request.
-    #[error("the fingertip refused: {}: {text}", code.name())]
-    Refused {
-        /// Why.
-        code: ErrorCode,
-        /// Its words.
-        text: String,
-    },
     /// It answered something else than the request's response.
     #[error("unexpected answer to {request}: {answer}")]
     Unexpected {
@@ -127,20 +119,9 @@ pub enum RecordingError {
     },
 }
 
-/// Sends `request`, an error response an error.
-fn ask<L: Link>(client: &mut Client<L>, request: &Request<'_>) -> Result<Response, RecordingError> {
-    match client.request(request)? {
-        Response::Error(code, text) => Err(RecordingError::Refused {
-            code,
-            text: text.to_string(),
-        }),
-        r => Ok(r),
-    }
-}
-
 /// What the fingertip's recorder holds.
 pub fn info<L: Link>(client: &mut Client<L>) -> Result<RecordingInfo, RecordingError> {
-    match ask(client, &Request::RecordingInfo)? {
+    match client.ask(&Request::RecordingInfo)? {
         Response::Recording(i) => Ok(i),
         other => Err(RecordingError::Unexpected {
             request: "recording info",
@@ -188,7 +169,7 @@ pub fn fetch<L: Link>(client: &mut Client<L>) -> Result<Recording, RecordingErro
             bytes: info.bytes,
             why,
         };
-        match ask(client, &Request::RecordingRead(at))? {
+        match client.ask(&Request::RecordingRead(at))? {
             Response::Page { offset, data } if offset == at && !data.is_empty() => {
                 bytes.extend_from_slice(&data);
             }

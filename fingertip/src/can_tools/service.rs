@@ -46,6 +46,14 @@ pub enum ClientError {
     /// The bus interface failed.
     #[error("CAN interface: {0}")]
     Io(#[from] std::io::Error),
+    /// The fingertip answered with an error response ([`Client::ask`]).
+    #[error("the fingertip refused: {}: {text}", code.name())]
+    Refused {
+        /// Why.
+        code: fingertip_can::service::ErrorCode,
+        /// Its words.
+        text: String,
+    },
 }
 
 /// Sends requests over a [`Link`] and reads their responses.
@@ -94,6 +102,17 @@ impl<L: Link> Client<L> {
             attempts: ATTEMPTS,
             last,
         })
+    }
+
+    /// [`Client::request`], with an error response as [`ClientError::Refused`].
+    pub fn ask(&mut self, request: &Request<'_>) -> Result<Response, ClientError> {
+        match self.request(request)? {
+            Response::Error(code, text) => Err(ClientError::Refused {
+                code,
+                text: text.to_string(),
+            }),
+            r => Ok(r),
+        }
     }
 
     /// After a broken attempt: waits until the fingertip has been silent for longer than
