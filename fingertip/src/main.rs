@@ -1609,8 +1609,12 @@ fn run_jobs(
     let jobs = Scenario::single_event().len() * runs + free_runs;
     let bar = progress(jobs, "runs")?;
     let started = Instant::now();
+    // Jobs are split down to one each: a 60 s free-motion run costs hundreds of event runs,
+    // and rayon's default splitting would leave a batch of them in one thread's share while
+    // the other core idles.
     let results: Result<Vec<JobResult>> = (0..jobs)
         .into_par_iter()
+        .with_max_len(1)
         .map(|i| {
             let result = run_job(detectors, Job::at(i, runs), base_seed);
             bar.inc(1);
@@ -2006,8 +2010,10 @@ fn evaluate_traces(
     let jobs = files.len() * detectors.len();
     let bar = progress(jobs, "recordings")?;
     let started = Instant::now();
+    // One recording per job, as in `run_jobs`: recordings differ in length by 1,000 times.
     let results: Vec<fingertip::corpus::RecordingResult> = (0..jobs)
         .into_par_iter()
+        .with_max_len(1)
         .map(|i| {
             let (file, detector) = (&files[i / detectors.len()], &detectors[i % detectors.len()]);
             let reader = TraceReader::open(file)?;
