@@ -565,12 +565,15 @@ pub fn decide_event(
     out: &mut Output,
 ) {
     let i = i & (MAX_EVENTS - 1);
-    let excluded = excluded_by != 0
-        && state
-            .events
-            .iter()
-            .enumerate()
-            .any(|(j, e)| excluded_by & (1 << j) != 0 && e.levels[1].up);
+    // Bit by bit over the mask, which the generated tick has as a constant: one load per
+    // excluding event, not one per slot.
+    let mut excluded = false;
+    let mut rest = excluded_by;
+    while rest != 0 {
+        let j = rest.trailing_zeros() as usize & (MAX_EVENTS - 1);
+        excluded |= state.events[j].levels[1].up;
+        rest &= rest - 1;
+    }
     let st = &mut state.events[i];
     let bit: EventMask = 1 << i;
     let q = c.to_bits();

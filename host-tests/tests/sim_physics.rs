@@ -77,6 +77,14 @@ fn joint_directions(tr: &Trace) -> [[f64; 2]; 2] {
     })
 }
 
+/// How far the position error moved, in any direction, from row `from` to row `to` (m):
+/// a joint takes the tip's motion away, or a knock pushes it, in the direction that joint
+/// moves the tip, which the pad's side on the distal link may turn across the approach.
+fn error_moved(tr: &Trace, from: usize, to: usize) -> f64 {
+    let (x, y) = (col(tr, "pos_err_x"), col(tr, "pos_err_y"));
+    (x[to] - x[from]).hypot(y[to] - y[from])
+}
+
 fn onset_row(tr: &Trace) -> usize {
     tr.truth_onset().expect("the run has a truth onset").0
 }
@@ -267,10 +275,22 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
                 Scenario::KnockLink1,
                 Scenario::KnockLink2,
             ];
-            let swing = if small.contains(&s) { 0.02 } else { 0.05 };
-            if tr.meta("disturbance_body") == Some("tip") {
+            // A blow on link 1 reaches the fingertip through both joints in joint 1's
+            // direction, which lies mostly across the approach where the pad is turned
+            // towards joint 1: along x, as little as a small one's.
+            let swing = if small.contains(&s) || tr.meta("disturbance_body") == Some("link1") {
+                0.02
+            } else {
+                0.05
+            };
+            let collision = [Scenario::LinkCollision8, Scenario::LinkCollision2].contains(&s);
+            if tr.meta("disturbance_body") == Some("tip") || collision {
                 // Struck above the sensor, the fingertip's housing loads it with the blow
-                // itself, one-sided; the ringing after it is smaller.
+                // itself, one-sided; the ringing after it is smaller. A collision changes
+                // the tip's velocity for good: the fingertip's inertia loads the sensor
+                // one way while it does, and where the pad is turned towards joint 1 the
+                // change lies mostly across the approach and its ringing along x may not
+                // cross back.
                 assert!(hi - lo > 2.0 * swing, "{what}: force swings {lo}..{hi}");
                 continue;
             }
@@ -287,38 +307,51 @@ fn collisions_and_disturbances_ring_about_zero_with_stress_rate_quiet() {
 
 #[test]
 fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
-    // Growth of the position error 100 ms after the onset, over its value at the onset.
-    let growth = |tr: &Trace| {
-        let on = onset_row(tr);
-        let e = col(tr, "pos_err_x");
-        e[on + 100 * MS] - e[on]
-    };
     for seed in 0..SEEDS {
         let r = seed > 0;
-        for s in [Scenario::ContactHard2, Scenario::ContactHard8] {
-            let g = growth(&run(s, seed, r));
-            assert!(g > 25e-6, "{s} seed {seed}: {g}");
+        // An object, rigid or soft (100 to 3000 N/m) at 2 cm/s, pushes back by a tenth of a
+        // newton or more after 100 ms (the arm goes on compressing the fingertip's foam);
+        // the position loops give way by A^-1 F / kp, kp the total mass x
+        // (2 pi bandwidth)^2 and A^-1 = u1 u1^T + u2 u2^T (the joints' unit directions),
+        // whose smaller eigenvalue is 1 - |u1 . u2|: in some direction (the skin's grip
+        // pushes across the approach too, and the loops couple the axes) the error grows
+        // by at least that much of the force over kp, and at least half of it shows.
+        for s in [
+            Scenario::ContactHard2,
+            Scenario::ContactHard8,
+            Scenario::ContactSoft2,
+        ] {
+            let tr = run(s, seed, r);
+            let [u1, u2] = joint_directions(&tr);
+            let kp = loop_stiffness(&tr) / (1.0 - (u1[0] * u2[0] + u1[1] * u2[1]).abs());
+            let on = onset_row(&tr);
+            let f = col(&tr, "force_x");
+            let pushed = baseline(f, on) - mean(&f[on + 95 * MS..on + 105 * MS]);
+            assert!(pushed > 0.1, "{s} seed {seed}: force {pushed}");
+            let g = error_moved(&tr, on, on + 100 * MS);
+            assert!(
+                g > 0.5 * pushed / kp,
+                "{s} seed {seed}: {g} (force over loop stiffness: {})",
+                pushed / kp
+            );
         }
-        // A soft object (100 to 3000 N/m) at 2 cm/s pushes back by a tenth of a newton or
-        // more after 100 ms; the position loop gives way by that force over its stiffness
-        // (total mass x (2 pi bandwidth)^2): at least half of it shows.
-        let tr = run(Scenario::ContactSoft2, seed, r);
-        let kp = loop_stiffness(&tr);
-        let on = onset_row(&tr);
-        let f = col(&tr, "force_x");
-        let pushed = baseline(f, on) - mean(&f[on + 95 * MS..on + 105 * MS]);
-        assert!(pushed > 0.1, "contact_soft_2 seed {seed}: force {pushed}");
-        let g = growth(&tr);
-        assert!(
-            g > 0.5 * pushed / kp,
-            "contact_soft_2 seed {seed}: {g} (force over loop stiffness: {})",
-            pushed / kp
-        );
         for s in [Scenario::LinkCollision2, Scenario::LinkCollision8] {
             let tr = run(s, seed, r);
-            let g = growth(&tr);
+            let on = onset_row(&tr);
+            // A collision takes motion away in whatever direction the struck link moves the
+            // tip: the error grows in that direction.
+            let g = error_moved(&tr, on, on + 100 * MS);
+            let travel = 0.1 * s.nominal_speed() * param(&tr, "motion.speed_factor");
             if tr.meta("struck_link") == Some("link1") {
-                assert!(g > 700e-6, "{s} seed {seed}: {g}");
+                // Joint 1 blocked: its share of the commanded velocity is lost for good.
+                let share: f64 = tr
+                    .meta("link1_speed_share")
+                    .and_then(|v| v.parse().ok())
+                    .expect("link 1 collisions record the share");
+                assert!(
+                    g > 0.7 * share * travel,
+                    "{s} seed {seed}: {g} of {share} x {travel}"
+                );
                 continue;
             }
             // Link 2 stopped, link 1 goes on bending the distal structure until its spring
@@ -332,7 +365,6 @@ fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
             let w = |f: f64| (std::f64::consts::TAU * f).powi(2);
             let k_link = arm * tip / (arm + tip) * w(p("plant.link_frequency"));
             let k_loop = loop_stiffness(&tr);
-            let travel = 0.1 * s.nominal_speed() * p("motion.speed_factor");
             let expected = travel * k_link / (k_link + k_loop);
             assert!(g > 0.7 * expected, "{s} seed {seed}: {g} of {expected}");
         }
@@ -345,14 +377,15 @@ fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
         ] {
             let tr = run(s, seed, r);
             let on = onset_row(&tr);
-            let e = col(&tr, "pos_err_x");
             // Disturbed, then brought back by the controller: at the run's end (30 ms or
             // more after the longest burst) the error is back within 15 um of where it was,
-            // or at least halfway back (a 10 Hz position loop takes its time).
-            let g = e[e.len() - 1] - e[on];
-            let peak = e[on..].iter().fold(0.0f64, |m, x| m.max((x - e[on]).abs()));
+            // or at least 40 % of the way back from its peak (a 10 Hz position loop's time
+            // constant is 16 to 23 ms, and a long burst, starting at phase zero, leaves a
+            // net impulse that pushes the arm off at its end).
+            let g = error_moved(&tr, on, tr.len() - 1);
+            let peak = (on..tr.len()).fold(0.0f64, |m, k| m.max(error_moved(&tr, on, k)));
             assert!(
-                g.abs() < 15e-6 || g.abs() < 0.5 * peak,
+                g < 15e-6 || g < 0.6 * peak,
                 "{s} seed {seed}: {g} (peak {peak})"
             );
         }
@@ -366,11 +399,11 @@ fn knocks_push_the_finger_off_its_path_and_leave_the_skin_untouched() {
             let tr = run(s, seed, seed > 0);
             let on = onset_row(&tr);
             let what = format!("{s} seed {seed}");
-            let e = col(&tr, "pos_err_x");
-            let moved = e[on..on + 20 * MS]
-                .iter()
-                .fold(0.0f64, |m, x| m.max((x - e[on]).abs()));
-            assert!(moved > 2e-6, "{what}: the error moved by {moved} m");
+            let moved = (on..on + 20 * MS).fold(0.0f64, |m, k| m.max(error_moved(&tr, on, k)));
+            // More than the encoders resolve (1 um): a blow on link 1 moves the tip along
+            // joint 1's direction, by its share of the blow, which may be small where that
+            // direction lies across the blow's.
+            assert!(moved > 1e-6, "{what}: the error moved by {moved} m");
             assert_stress_quiet(&tr, &what);
         }
     }
@@ -593,18 +626,24 @@ fn drive_force_is_limited() {
         let on = onset_row(&tr);
         let pressing = baseline(f, on) - mean(&f[f.len() - 10 * MS..]);
         let gain = param(&tr, "sensors.force_x_gain");
-        // The limit is per axis, and the sensor's x reading takes in a share of the y force
-        // (at most the limit too) through its misalignment and cross-axis sensitivity. When
+        // The limit is per joint: each joint's torque is held to the limit times its own
+        // travel per radian, so the drive pushes along a joint's direction u_j with at most
+        // the limit, and along x with at most the limit x (|u1y| + |u2y|) / |u1 x u2| (a
+        // corner of the parallelogram the two limits allow). The sensor's x reading takes
+        // in a share of the y force (at most as much) through its misalignment and
+        // cross-axis sensitivity. When
         // the drive saturates the finger still moves: its momentum, stopped through the
         // foam, adds speed x sqrt(foam stiffness x mass) at most.
         let mixed = param(&tr, "sensors.force_misalignment").sin().abs()
             + param(&tr, "sensors.force_x_cross_axis").abs();
+        let [u1, u2] = joint_directions(&tr);
+        let most = limit * (u1[1].abs() + u2[1].abs()) / (u1[0] * u2[1] - u1[1] * u2[0]).abs();
         let p = |k: &str| param(&tr, k);
         let momentum =
             0.08 * p("motion.speed_factor") * (p("plant.foam_stiffness") * finger_mass(&tr)).sqrt();
         assert!(
-            pressing < 1.05 * gain * (limit * (1.0 + mixed) + momentum),
-            "seed {seed}: pressing with {pressing} N, limit {limit} N"
+            pressing < 1.05 * gain * (most * (1.0 + mixed) + momentum),
+            "seed {seed}: pressing with {pressing} N, limit {limit} N, {most} N along x"
         );
         reached += usize::from(pressing > 0.8 * gain * limit);
     }
@@ -740,7 +779,7 @@ fn free_motion_changes_velocity_gently_while_moving() {
 #[test]
 fn padded_tip_rings_at_its_suspension_mode() {
     let mut checked = 0;
-    for seed in 1..=15 * SEEDS {
+    for seed in 1..=40 * SEEDS {
         let tr = run(Scenario::SuddenAccelStandstill, seed, true);
         let p = |k: &str| param(&tr, k);
         let mode =
@@ -754,6 +793,9 @@ fn padded_tip_rings_at_its_suspension_mode() {
             || p("plant.link_frequency") < 3.0 * mode
             || p("plant.control_bandwidth") > 0.35 * mode
             || p("sensors.hum_lsb") > 0.75
+            // A padded tip: 5 g of skin or more, whose ring stands above that hum (a thin
+            // skin's is a few mN).
+            || p("plant.skin_mass") < 0.005
         {
             continue;
         }

@@ -4,9 +4,10 @@
 //! Every parameter is declared once, below, with its unit, nominal value, range and
 //! meaning; [`all_specs`] lists them all and `docs/simulator.md` carries the same table
 //! (a test keeps the two in step). Randomized runs draw each parameter of the groups a
-//! scenario from its range, independently, in declaration order: uniformly, or
-//! log-uniformly (every decade equally likely) for those marked `log`, the ones that span
-//! decades such as stiffnesses.
+//! scenario from its range, independently, in declaration order: uniformly; log-uniformly
+//! (every decade equally likely) for those marked `log`, the ones that span decades such
+//! as stiffnesses; or, for those marked `either_sign`, a magnitude drawn uniformly from
+//! the range with either sign equally likely (an angle that can lie on either side).
 
 use rand::{Rng, RngExt};
 
@@ -21,14 +22,52 @@ pub struct ParamSpec {
     pub unit: &'static str,
     /// The value of non-randomized runs.
     pub nominal: f64,
-    /// The smallest value a randomized run draws.
+    /// The smallest value (or, drawn with either sign, the smallest magnitude) a randomized
+    /// run draws.
     pub min: f64,
-    /// The largest value a randomized run draws.
+    /// The largest value (or magnitude) a randomized run draws.
     pub max: f64,
-    /// Drawn log-uniformly (every decade equally likely) rather than uniformly.
-    pub log: bool,
+    /// How a randomized run draws it from the range.
+    pub draw: Draw,
     /// What the parameter is.
     pub doc: &'static str,
+}
+
+/// How a randomized run draws a parameter from its range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Draw {
+    /// Uniformly.
+    Uniform,
+    /// Log-uniformly: every decade equally likely.
+    Log,
+    /// A magnitude drawn uniformly from the range, with either sign equally likely.
+    EitherSign,
+}
+
+impl Draw {
+    /// A draw from `[lo, hi]` this way.
+    fn from<R: Rng>(self, rng: &mut R, lo: f64, hi: f64) -> f64 {
+        match self {
+            Draw::Uniform => uniform(rng, lo, hi),
+            Draw::Log => log_uniform(rng, lo, hi),
+            Draw::EitherSign => {
+                let magnitude = uniform(rng, lo, hi);
+                if rng.random::<bool>() {
+                    magnitude
+                } else {
+                    -magnitude
+                }
+            }
+        }
+    }
+
+    /// Whether `v` is a value this way of drawing from `[lo, hi]` gives.
+    pub fn admits(self, v: f64, lo: f64, hi: f64) -> bool {
+        match self {
+            Draw::Uniform | Draw::Log => (lo..=hi).contains(&v),
+            Draw::EitherSign => (lo..=hi).contains(&v.abs()),
+        }
+    }
 }
 
 /// A uniform draw from `[lo, hi]` (exactly `lo` when the range is empty).
@@ -46,8 +85,9 @@ pub(crate) fn log_uniform<R: Rng>(rng: &mut R, lo: f64, hi: f64) -> f64 {
 }
 
 macro_rules! param_group {
-    (@log) => { false };
-    (@log log) => { true };
+    (@draw) => { Draw::Uniform };
+    (@draw log) => { Draw::Log };
+    (@draw either_sign) => { Draw::EitherSign };
     (
         $(#[doc = $sdoc:literal])+
         struct $name:ident, group $group:literal {
@@ -70,7 +110,7 @@ macro_rules! param_group {
                     nominal: $nom,
                     min: $lo,
                     max: $hi,
-                    log: param_group!(@log $($scale)?),
+                    draw: param_group!(@draw $($scale)?),
                     doc: concat!($($doc),+),
                 }, )+
             ];
@@ -80,14 +120,10 @@ macro_rules! param_group {
                 Self { $( $field: $nom, )+ }
             }
 
-            /// Every parameter drawn from its range (log-uniformly where so marked), in
-            /// declaration order.
+            /// Every parameter drawn from its range as marked ([`Draw`]), in declaration
+            /// order.
             pub fn draw<R: Rng>(rng: &mut R) -> Self {
-                Self { $( $field: if param_group!(@log $($scale)?) {
-                    log_uniform(rng, $lo, $hi)
-                } else {
-                    uniform(rng, $lo, $hi)
-                }, )+ }
+                Self { $( $field: param_group!(@draw $($scale)?).from(rng, $lo, $hi), )+ }
             }
 
             /// Nominal values, or drawn ones when `randomize` is set.
@@ -196,13 +232,16 @@ param_group! {
         /// joints move the tip along one line; 90 degrees: square).
         flexion: "rad" = std::f64::consts::FRAC_PI_3, [FLEXION_MIN, std::f64::consts::FRAC_PI_2];
         /// Angle of the pad normal x from the direction joint 2 alone moves the tip
-        /// (perpendicular to link 2), turned away from joint 1's direction: how the pad sits
-        /// on the distal link. It sets how the approach splits between the joints: at 0,
-        /// joint 2 would make it alone and link 1 would not move (nor strike anything); over
-        /// the ranges drawn, link 1's share of the tip's velocity, what a link 1 collision
-        /// takes away, is 12 % to 290 % of the commanded speed (median 84 %; above 100 %,
-        /// joint 2 alone moves the tip partly backwards).
-        pad_angle: "rad" = PAD_ANGLE_NOMINAL, [FIFTEEN_DEGREES, std::f64::consts::FRAC_PI_4];
+        /// (perpendicular to link 2): how the pad sits on the distal link, on either side.
+        /// It sets how the approach splits between the joints: at 0, joint 2 would make it
+        /// alone and link 1 would not move (nor strike anything). The magnitude sets the
+        /// share of the tip's velocity that link 1 carries, what a link 1 collision takes
+        /// away: 12 % to 290 % of the commanded speed over the ranges drawn (median 84 %;
+        /// above 100 %, joint 2 alone moves the tip partly backwards), the same on either
+        /// side. The side sets its direction: turned away from joint 1's direction
+        /// (positive), mostly along the approach; turned towards it (negative), mostly
+        /// across the approach.
+        pad_angle: "rad" = PAD_ANGLE_NOMINAL, [FIFTEEN_DEGREES, std::f64::consts::FRAC_PI_4] either_sign;
         /// Share of the skin's mass (`skin_mass`) above the stress-rate film: the film,
         /// pressed by the skin it carries, also reads that mass times the rate of the
         /// skin's acceleration along the pad normal. 0: a film at the surface, carrying
@@ -533,14 +572,23 @@ pub fn specs_markdown() -> String {
     );
     for p in all_specs() {
         s.push_str(&format!(
-            "| `{}.{}` | {} | {} | {} .. {}{} | {} |\n",
+            "| `{}.{}` | {} | {} | {}{} .. {}{} | {} |\n",
             p.group,
             p.name,
             p.unit,
             fmt_num(p.nominal),
+            if p.draw == Draw::EitherSign {
+                "±("
+            } else {
+                ""
+            },
             fmt_num(p.min),
             fmt_num(p.max),
-            if p.log { " (log)" } else { "" },
+            match p.draw {
+                Draw::Uniform => "",
+                Draw::Log => " (log)",
+                Draw::EitherSign => ")",
+            },
             p.doc.trim().replace("  ", " ")
         ));
     }
@@ -569,7 +617,7 @@ mod tests {
     fn nominal_inside_ranges_and_names_unique() {
         let specs = all_specs();
         for p in &specs {
-            assert!(p.min <= p.nominal && p.nominal <= p.max, "{p:?}");
+            assert!(p.draw.admits(p.nominal, p.min, p.max), "{p:?}");
             assert!(!p.doc.trim().is_empty(), "{p:?}");
         }
         for (i, p) in specs.iter().enumerate() {
@@ -591,7 +639,7 @@ mod tests {
         use rand::SeedableRng;
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(11);
         let spec = SoftObject::SPECS[0];
-        assert!(spec.log);
+        assert_eq!(spec.draw, Draw::Log);
         let middle = (spec.min * spec.max).sqrt();
         let n = 4000;
         let below = (0..n)
@@ -600,14 +648,26 @@ mod tests {
         assert!((1800..2200).contains(&below), "{below} of {n}");
     }
 
+    /// The pad sits on either side of the distal link in about half the runs each.
+    #[test]
+    fn either_sign_parameters_take_both_signs() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(5);
+        let n = 4000;
+        let negative = (0..n)
+            .filter(|_| Plant::draw(&mut rng).pad_angle < 0.0)
+            .count();
+        assert!((1800..2200).contains(&negative), "{negative} of {n}");
+    }
+
     #[test]
     fn draws_stay_in_range() {
         use rand::SeedableRng;
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(7);
         for _ in 0..200 {
             let p = Plant::draw(&mut rng);
-            for ((_, v), s) in p.values().iter().zip(Plant::SPECS) {
-                assert!(*v >= s.min && *v <= s.max);
+            for ((name, v), s) in p.values().iter().zip(Plant::SPECS) {
+                assert!(s.draw.admits(*v, s.min, s.max), "{name} = {v}");
             }
         }
     }
