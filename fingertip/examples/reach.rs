@@ -104,6 +104,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
     let runs: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(500);
     let base: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(1);
+    if runs == 0 || base.checked_add(runs).is_none() {
+        return Err(
+            format!("RUNS = {runs} must be at least 1, and BASE_SEED + RUNS within u64").into(),
+        );
+    }
     let config = detector_build::Config::from_toml(APPROACH_TOML)?;
     let detector = detector_build::build(&config)?;
     println!(
