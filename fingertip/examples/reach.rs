@@ -14,6 +14,8 @@
 //! A detector can only find an event whose signal stands out of the sensors' own reading;
 //! where the right share falls with the signal, the misses are at the sensors' reach.
 
+mod seeds;
+
 use detector_core::Detector;
 use fingertip::score::{Outcome, classify};
 use fingertip::sim::{self, Scenario, SimOptions};
@@ -101,14 +103,7 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(f64, [f64; 3], bo
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let runs: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(500);
-    let base: u64 = args.next().map(|a| a.parse()).transpose()?.unwrap_or(1);
-    if runs == 0 || base.checked_add(runs).is_none() {
-        return Err(
-            format!("RUNS = {runs} must be at least 1, and BASE_SEED + RUNS within u64").into(),
-        );
-    }
+    let (runs, base) = seeds::runs_and_base(500)?;
     let config = detector_build::Config::from_toml(APPROACH_TOML)?;
     let detector = detector_build::build(&config)?;
     println!(
