@@ -17,7 +17,8 @@
 mod seeds;
 
 use detector_core::Detector;
-use fingertip::score::{Outcome, classify};
+use fingertip::score::classify;
+use fingertip::sim::filters::HighPass1;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
@@ -26,18 +27,12 @@ use rayon::prelude::*;
 /// Rows per millisecond at the simulator's default rate.
 const MS: usize = 5;
 
-/// `x` high-passed at `hz` (first order) at `rate` samples per second.
+/// `x` high-passed at `hz` (the simulator's first-order RC coupling) at `rate` samples
+/// per second, from the steady state of its first sample.
 fn high_pass(x: &[f64], hz: f64, rate: f64) -> Vec<f64> {
-    let rc = 1.0 / (std::f64::consts::TAU * hz);
-    let a = rc / (rc + 1.0 / rate);
-    let mut y = Vec::with_capacity(x.len());
-    let (mut last_x, mut last_y) = (x.first().copied().unwrap_or(0.0), 0.0);
-    for &v in x {
-        last_y = a * (last_y + v - last_x);
-        last_x = v;
-        y.push(last_y);
-    }
-    y
+    let mut f = HighPass1::new(hz, rate);
+    f.settle(x.first().copied().unwrap_or(0.0));
+    x.iter().map(|&v| f.process(v)).collect()
 }
 
 /// RMS over `rows` of the vector whose components are `axes`.
@@ -91,10 +86,7 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(f64, [f64; 3], bo
     let (on, _) = tr.truth_onset()?;
     let onset_s = tr.time().get(on).copied()?;
     let decisions = replay::replay(detector, &tr, |_, _, _| {}).ok()?;
-    let right = matches!(
-        classify(s.expected().map(|e| (e, onset_s)), &decisions),
-        Outcome::Correct { .. }
-    );
+    let right = classify(s.expected().map(|e| (e, onset_s)), &decisions).is_right();
     if s == Scenario::ContactVerySoft1 {
         return Some((film_rise(&tr, on)?, [0.0; 3], right));
     }

@@ -104,7 +104,7 @@ impl<const L: usize> AntiAliasFilter<L> {
 
 /// A first-order high-pass filter (an RC coupling), bilinear transform.
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct HighPass1 {
+pub struct HighPass1 {
     b0: f64,
     a1: f64,
     x1: f64,
@@ -113,7 +113,7 @@ pub(crate) struct HighPass1 {
 
 impl HighPass1 {
     /// A high-pass with corner `fc` at sampling rate `fs`.
-    pub(crate) fn new(fc: f64, fs: f64) -> HighPass1 {
+    pub fn new(fc: f64, fs: f64) -> HighPass1 {
         let k = (PI * fc / fs).tan();
         HighPass1 {
             b0: 1.0 / (1.0 + k),
@@ -123,8 +123,15 @@ impl HighPass1 {
         }
     }
 
+    /// Puts the filter in the steady state of its constant input `x` (output 0).
+    pub fn settle(&mut self, x: f64) {
+        self.x1 = x;
+        self.y1 = 0.0;
+    }
+
+    /// The next output for input `x`.
     #[inline]
-    pub(crate) fn process(&mut self, x: f64) -> f64 {
+    pub fn process(&mut self, x: f64) -> f64 {
         let y = self.b0 * (x - self.x1) - self.a1 * self.y1;
         self.x1 = x;
         self.y1 = y;
