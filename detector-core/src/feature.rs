@@ -46,12 +46,23 @@ pub enum StageSpec<N> {
     /// what it has seen: the n-th sample weighs max(α, 1/n), so the output starts at the
     /// first sample (a channel's offset does not look like a step) and is the plain mean of
     /// the samples so far until that mean would forget more slowly than the filter (at most
-    /// the first 65,535 samples). The state keeps 32 fraction bits.
+    /// the first 65,535 samples), or until `warm_up_ms` has passed. The state keeps 32
+    /// fraction bits.
     LowPass {
         /// Source channel or feature.
         input: N,
         /// Cut-off frequency f_c in Hz, above 0 and below half the detector rate.
         cutoff_hz: f32,
+        /// The longest the warm-up's plain mean lasts (ms): after it the filter forgets at
+        /// its cut-off, so that what comes later is not averaged in at the mean's weight
+        /// (a usual level learnt over the first tens of ms, not over the first second).
+        /// Above 0 and at most 65,534 samples; absent, the warm-up lasts as long as the
+        /// mean would weigh a sample more than the filter.
+        #[cfg_attr(
+            feature = "serde",
+            serde(default, skip_serializing_if = "Option::is_none")
+        )]
+        warm_up_ms: Option<f32>,
     },
     /// The input's envelope: up with the input at once, down as the
     /// [`StageSpec::LowPass`] at `cutoff_hz` (y = x when x ≥ y, else y += α (x − y)):
@@ -211,9 +222,14 @@ impl<N> StageSpec<N> {
         Ok(match self {
             StageSpec::Raw { input } => StageSpec::Raw { input: f(input)? },
             StageSpec::Abs { input } => StageSpec::Abs { input: f(input)? },
-            StageSpec::LowPass { input, cutoff_hz } => StageSpec::LowPass {
+            StageSpec::LowPass {
+                input,
+                cutoff_hz,
+                warm_up_ms,
+            } => StageSpec::LowPass {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
+                warm_up_ms: *warm_up_ms,
             },
             StageSpec::Envelope { input, cutoff_hz } => StageSpec::Envelope {
                 input: f(input)?,
@@ -300,6 +316,14 @@ pub enum StageError {
         /// The gain.
         gain: f32,
     },
+    /// A low-pass's warm-up is not finite, not positive, or longer than its sample counter
+    /// holds at the detector rate.
+    WarmUp {
+        /// The requested warm-up in ms.
+        warm_up_ms: f32,
+        /// The longest the detector rate allows, in ms.
+        max_ms: f32,
+    },
     /// An STE or mean window is empty or longer than [`MAX_WINDOW`].
     WindowLength {
         /// The requested length.
@@ -322,6 +346,10 @@ impl core::fmt::Display for StageError {
             } => write!(
                 f,
                 "cutoff_hz = {cutoff_hz} must be above 0 and below half the detector rate ({nyquist_hz} Hz)"
+            ),
+            StageError::WarmUp { warm_up_ms, max_ms } => write!(
+                f,
+                "warm_up_ms = {warm_up_ms} must be above 0 and at most {max_ms} ms (65,534 samples at the detector rate)"
             ),
             StageError::Gain { gain } => write!(
                 f,
@@ -362,10 +390,12 @@ pub struct Stage(StageKind);
 pub enum StageKind {
     Raw(u8),
     Abs(u8),
-    /// `alpha` is α in Q31.
+    /// `alpha` is α in Q31; `warm` the most samples the warm-up's mean counts
+    /// ([`WARM_LIMIT`] when the mean alone ends it).
     LowPass {
         input: u8,
         alpha: u32,
+        warm: u16,
     },
     /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`].
     Envelope {
@@ -539,9 +569,14 @@ impl Stage {
         Ok(Stage(match *spec {
             StageSpec::Raw { input } => StageKind::Raw(input),
             StageSpec::Abs { input } => StageKind::Abs(input),
-            StageSpec::LowPass { input, cutoff_hz } => StageKind::LowPass {
+            StageSpec::LowPass {
+                input,
+                cutoff_hz,
+                warm_up_ms,
+            } => StageKind::LowPass {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+                warm: warm_up_samples(rate_hz, warm_up_ms)?,
             },
             StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
                 input,
@@ -622,7 +657,7 @@ impl Stage {
         match self.0 {
             StageKind::Raw(i) => get(i),
             StageKind::Abs(i) => get(i).saturating_abs(),
-            StageKind::LowPass { input, alpha } => low_pass(st, get(input), alpha),
+            StageKind::LowPass { input, alpha, warm } => low_pass(st, get(input), alpha, warm),
             StageKind::Envelope { input, alpha } => {
                 let x = get(input);
                 // Compared at the state's full resolution, not the output's: an input
@@ -639,7 +674,7 @@ impl Stage {
             }
             StageKind::HighPass { input, alpha } => {
                 let x = get(input);
-                x.saturating_sub(low_pass(st, x, alpha))
+                x.saturating_sub(low_pass(st, x, alpha, WARM_LIMIT))
             }
             StageKind::Cancel {
                 input,
@@ -647,7 +682,7 @@ impl Stage {
                 alpha,
                 gain,
             } => {
-                let y = low_pass(st, get(motion), alpha);
+                let y = low_pass(st, get(motion), alpha, WARM_LIMIT);
                 // |y| ≤ 2^31 and |gain| < 2^31: the product fits in 63 bits, and the
                 // difference in 64; it saturates once, at the end.
                 let predicted = (i64::from(y) * i64::from(gain)) >> 16;
@@ -821,10 +856,11 @@ impl Stage {
                 w.u8(StageTag::Abs as u8);
                 w.u8(i);
             }
-            StageKind::LowPass { input, alpha } => {
+            StageKind::LowPass { input, alpha, warm } => {
                 w.u8(StageTag::LowPass as u8);
                 w.u8(input);
                 w.u32(alpha);
+                w.u16(warm);
             }
             StageKind::HighPass { input, alpha } => {
                 w.u8(StageTag::HighPass as u8);
@@ -905,6 +941,7 @@ impl Stage {
             Some(StageTag::LowPass) => StageKind::LowPass {
                 input: r.u8()?,
                 alpha: r.u32()?,
+                warm: r.u16()?,
             },
             Some(StageTag::HighPass) => StageKind::HighPass {
                 input: r.u8()?,
@@ -1003,6 +1040,7 @@ impl StageKind {
             {
                 Some("low-pass coefficient")
             }
+            StageKind::LowPass { warm: 0, .. } => Some("low-pass warm-up"),
             StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
             StageKind::Difference { gain, .. } if gain == i32::MIN => Some("difference gain"),
             StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
@@ -1084,8 +1122,11 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
         match self.0.0 {
             StageKind::Raw(i) => write!(f, "Raw({i})"),
             StageKind::Abs(i) => write!(f, "Abs({i})"),
-            StageKind::LowPass { input, alpha } => {
-                write!(f, "LowPass {{ input: {input}, alpha: {alpha} }}")
+            StageKind::LowPass { input, alpha, warm } => {
+                write!(
+                    f,
+                    "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm} }}"
+                )
             }
             StageKind::HighPass { input, alpha } => {
                 write!(f, "HighPass {{ input: {input}, alpha: {alpha} }}")
@@ -1175,6 +1216,23 @@ fn low_pass_alpha(rate_hz: f32, cutoff_hz: f32) -> Result<u32, StageError> {
     Ok(alpha.clamp(1, (1 << 31) - 1) as u32)
 }
 
+/// The most samples a low-pass's warm-up counts: `warm_up_ms` at the detector rate
+/// (rounded, at least one), or [`WARM_LIMIT`] when absent.
+fn warm_up_samples(rate_hz: f32, warm_up_ms: Option<f32>) -> Result<u16, StageError> {
+    let Some(ms) = warm_up_ms else {
+        return Ok(WARM_LIMIT);
+    };
+    let max_ms = f32::from(WARM_LIMIT - 1) * 1000.0 / rate_hz;
+    if !(ms.is_finite() && ms > 0.0 && ms <= max_ms) {
+        return Err(StageError::WarmUp {
+            warm_up_ms: ms,
+            max_ms,
+        });
+    }
+    let samples = (ms * rate_hz / 1000.0 + 0.5) as u16;
+    Ok(samples.clamp(1, WARM_LIMIT - 1))
+}
+
 /// A cancellation gain in Q16.16, as a [`Signal`](crate::Signal) converts it: finite,
 /// |gain| < 32768, and zero or at least one step.
 fn gain_q16(gain: f32) -> Result<i32, StageError> {
@@ -1189,20 +1247,21 @@ fn gain_q16(gain: f32) -> Result<i32, StageError> {
 /// One tick of the first-order low-pass y += g (x − y), the state in Q32, the gain g in
 /// Q31: α, or while the filter warms up 1/n for its n-th sample, whichever is larger (the
 /// first sample sets y; until 1/n falls below α, y is the mean of the samples so far, to
-/// within the rounding of 1/n). The warm-up counts at most [`WARM_LIMIT`] samples.
+/// within the rounding of 1/n). The warm-up counts at most `warm` samples (at most
+/// [`WARM_LIMIT`]).
 ///
 /// The output needs no saturation: with y = ⌊acc / 2¹⁶⌋ and 0 < g < 1, a step down adds
 /// ⌊(x − y) 2¹⁶ g⌋ ≥ (x − y) 2¹⁶, a step up less than (x − y) 2¹⁶, so the new y lies
 /// between x and the old y, inside the `i32` range (a property test holds it there).
 #[inline(always)]
-fn low_pass(st: &mut StageState, x: i32, alpha: u32) -> i32 {
+fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
     if !st.primed {
         st.primed = true;
         st.pos = 1;
         st.acc = i64::from(x) << 16;
     } else {
         let mut gain = alpha;
-        if st.pos < WARM_LIMIT {
+        if st.pos < warm {
             st.pos += 1;
             // n ≥ 2, so 2^31 / n ≤ 2^30 (one 32-bit division, in hardware on the chip).
             let warm = (1u32 << 31) / u32::from(st.pos);
@@ -1390,6 +1449,7 @@ mod tests {
             StageSpec::LowPass {
                 input: 0,
                 cutoff_hz: 50.0,
+                warm_up_ms: None,
             },
             &[&x],
         );
@@ -1401,6 +1461,7 @@ mod tests {
             StageSpec::LowPass {
                 input: 0,
                 cutoff_hz: 50.0,
+                warm_up_ms: None,
             },
             &[&step],
         );
@@ -1413,6 +1474,34 @@ mod tests {
         let next = 0.75 + alpha * 0.25;
         assert!((y[4] - next).abs() < 1e-4, "{} vs {next}", y[4]);
         assert!((y[300] - 1.0).abs() < 2.0 / 65536.0);
+    }
+
+    /// A warm-up limited to `warm_up_ms` is the plain mean of that many samples, then the
+    /// filter at its cut-off: what comes after is not averaged in at the mean's weight.
+    #[test]
+    fn low_pass_warm_up_ends_after_its_limit() {
+        // 1 Hz at 1 kHz: α = 0.0062, below 1/n for the first 160 samples.
+        let spec = |warm_up_ms| StageSpec::LowPass {
+            input: 0,
+            cutoff_hz: 1.0,
+            warm_up_ms,
+        };
+        let mut x = vec![0.0; 10];
+        x.extend([100.0; 30]);
+        let limited = run(spec(Some(10.0)), &[&x]);
+        let unlimited = run(spec(None), &[&x]);
+        let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI));
+        // The first ten samples: the mean (zero) either way.
+        assert_eq!(limited[9], 0.0);
+        assert_eq!(unlimited[9], 0.0);
+        // Then the limited filter forgets at α, the unlimited one still at 1/n.
+        let expected = 100.0 * (1.0 - (1.0 - alpha).powi(30));
+        assert!(
+            (limited[39] - expected).abs() < 1e-3,
+            "{} vs {expected}",
+            limited[39]
+        );
+        assert!((unlimited[39] - 75.0).abs() < 1e-3, "{}", unlimited[39]);
     }
 
     /// The low-pass output lies between its input and its last output, so it needs no
@@ -1429,14 +1518,14 @@ mod tests {
         let extremes = [i32::MIN, i32::MIN + 1, -1, 0, 1, i32::MAX - 1, i32::MAX];
         for alpha in [1, 2, 1 << 20, 1 << 30, (1 << 31) - 2, (1 << 31) - 1] {
             let mut st = StageState::default();
-            let mut last = low_pass(&mut st, 0, alpha);
+            let mut last = low_pass(&mut st, 0, alpha, WARM_LIMIT);
             for k in 0..20_000 {
                 let x = if k % 3 == 0 {
                     extremes[next() as usize % extremes.len()]
                 } else {
                     next() as i32
                 };
-                let y = low_pass(&mut st, x, alpha);
+                let y = low_pass(&mut st, x, alpha, WARM_LIMIT);
                 assert_eq!(
                     i64::from(y),
                     st.acc >> 16,
@@ -1561,7 +1650,8 @@ mod tests {
         assert_eq!(
             compile(StageSpec::LowPass {
                 input: 0,
-                cutoff_hz: 600.0
+                cutoff_hz: 600.0,
+                warm_up_ms: None
             }),
             Err(StageError::Cutoff {
                 cutoff_hz: 600.0,
@@ -1571,9 +1661,31 @@ mod tests {
         assert!(
             compile(StageSpec::LowPass {
                 input: 0,
-                cutoff_hz: f32::NAN
+                cutoff_hz: f32::NAN,
+                warm_up_ms: None
             })
             .is_err()
+        );
+        // 65,534 samples at 1 kHz are 65.534 s.
+        for warm_up_ms in [0.0, -1.0, f32::NAN, f32::INFINITY, 65_535.0] {
+            assert_eq!(
+                compile(StageSpec::LowPass {
+                    input: 0,
+                    cutoff_hz: 1.0,
+                    warm_up_ms: Some(warm_up_ms)
+                })
+                .map_err(|e| matches!(e, StageError::WarmUp { max_ms, .. } if max_ms == 65_534.0)),
+                Err(true),
+                "{warm_up_ms}"
+            );
+        }
+        assert!(
+            compile(StageSpec::LowPass {
+                input: 0,
+                cutoff_hz: 1.0,
+                warm_up_ms: Some(65_534.0)
+            })
+            .is_ok()
         );
         assert_eq!(
             compile(StageSpec::Ste {

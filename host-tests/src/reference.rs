@@ -184,6 +184,8 @@ enum Stage {
     LowPass {
         input: usize,
         alpha: f64,
+        /// The most samples the warm-up's mean counts.
+        warm: u32,
     },
     HighPass {
         input: usize,
@@ -282,10 +284,11 @@ const WARM_LIMIT: u32 = 65535;
 
 impl StageState {
     /// One tick of the low-pass y += g (x − y) with g = max(α, 1/n) for the n-th sample
-    /// while n ≤ [`WARM_LIMIT`], α after: the mean of the samples so far until α weighs more.
-    fn low_pass(&mut self, x: f64, alpha: f64) -> f64 {
+    /// while n ≤ `warm` (at most [`WARM_LIMIT`]), α after: the mean of the samples so far
+    /// until α weighs more or the warm-up's limit has passed.
+    fn low_pass(&mut self, x: f64, alpha: f64, warm: u32) -> f64 {
         self.seen = self.seen.saturating_add(1);
-        let warm = if self.seen <= WARM_LIMIT {
+        let warm = if self.seen <= warm {
             1.0 / f64::from(self.seen)
         } else {
             0.0
@@ -419,9 +422,16 @@ impl Model {
             stages.push(match resolved {
                 StageSpec::Raw { input } => Stage::Raw(input),
                 StageSpec::Abs { input } => Stage::Abs(input),
-                StageSpec::LowPass { input, cutoff_hz } => Stage::LowPass {
+                StageSpec::LowPass {
+                    input,
+                    cutoff_hz,
+                    warm_up_ms,
+                } => Stage::LowPass {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                    warm: warm_up_ms.map_or(WARM_LIMIT, |ms| {
+                        ((f64::from(ms) * rate / 1000.0).round() as u32).clamp(1, WARM_LIMIT - 1)
+                    }),
                 },
                 StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
                     input,
@@ -591,10 +601,10 @@ impl Model {
             let value = match stage {
                 Stage::Raw(i) => v(*i),
                 Stage::Abs(i) => v(*i).abs(),
-                Stage::LowPass { input, alpha } => st.low_pass(v(*input), *alpha),
+                Stage::LowPass { input, alpha, warm } => st.low_pass(v(*input), *alpha, *warm),
                 Stage::HighPass { input, alpha } => {
                     let x = v(*input);
-                    x - st.low_pass(x, *alpha)
+                    x - st.low_pass(x, *alpha, WARM_LIMIT)
                 }
                 Stage::Envelope { input, alpha } => {
                     let x = v(*input);
@@ -611,7 +621,7 @@ impl Model {
                     motion,
                     alpha,
                     gain,
-                } => v(*input) - gain * st.low_pass(v(*motion), *alpha),
+                } => v(*input) - gain * st.low_pass(v(*motion), *alpha, WARM_LIMIT),
                 Stage::Rate { input, rate } => {
                     let x = v(*input);
                     let r = st.previous.map_or(0.0, |p| (x - p) * rate);

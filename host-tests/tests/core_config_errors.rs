@@ -182,6 +182,7 @@ fn nan_anywhere() {
             c.features[0].stage = StageSpec::LowPass {
                 input: name("a"),
                 cutoff_hz: nan,
+                warm_up_ms: None,
             }
         },
         &["feature 'fa'", "cutoff_hz = NaN"],
@@ -218,6 +219,7 @@ fn infinity_anywhere() {
             c.features[1].stage = StageSpec::LowPass {
                 input: name("b"),
                 cutoff_hz: inf,
+                warm_up_ms: None,
             }
         },
         &["feature 'fb'", "cutoff_hz = inf"],
@@ -435,6 +437,7 @@ fn other_rules() {
             c.features[0].stage = StageSpec::LowPass {
                 input: name("a"),
                 cutoff_hz: 500.0,
+                warm_up_ms: None,
             }
         },
         &["cutoff_hz = 500", "500 Hz"],

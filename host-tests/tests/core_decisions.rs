@@ -391,6 +391,7 @@ fn faults_follow_feature_chains() {
                 StageSpec::LowPass {
                     input: name("d"),
                     cutoff_hz: 100.0,
+                    warm_up_ms: None,
                 },
             ),
             ("fx", raw("x")),

@@ -111,9 +111,14 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
         n().prop_map(|input| StageSpec::Abs { input }),
         (
             n(),
-            prop_oneof![1 => any_f32(), 12 => 0.1f32..4.9, 2 => 0.1f32..3000.0]
+            prop_oneof![1 => any_f32(), 12 => 0.1f32..4.9, 2 => 0.1f32..3000.0],
+            prop::option::of(prop_oneof![1 => any_f32(), 6 => 0.1f32..200.0])
         )
-            .prop_map(|(input, cutoff_hz)| StageSpec::LowPass { input, cutoff_hz }),
+            .prop_map(|(input, cutoff_hz, warm_up_ms)| StageSpec::LowPass {
+                input,
+                cutoff_hz,
+                warm_up_ms
+            }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
@@ -472,7 +477,11 @@ proptest! {
             let stage = match kind {
                 0 => StageSpec::Raw { input: p(0) },
                 1 => StageSpec::Abs { input: p(0) },
-                2 => StageSpec::LowPass { input: p(0), cutoff_hz: *cutoff },
+                2 => StageSpec::LowPass {
+                    input: p(0),
+                    cutoff_hz: *cutoff,
+                    warm_up_ms: k.is_multiple_of(2).then_some(5.0),
+                },
                 3 => StageSpec::Rate { input: p(0) },
                 4 => StageSpec::Difference { a: p(0), b: p(1), gain: *cutoff - 200.0 },
                 5 => StageSpec::Dot { a: [p(0), p(1)], b: [p(2), p(3)] },

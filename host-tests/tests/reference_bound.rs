@@ -264,6 +264,11 @@ fn stage_for(
                 StageSpec::LowPass {
                     input: n(s),
                     cutoff_hz,
+                    // A third with a warm-up of 1-97 ms.
+                    warm_up_ms: p
+                        .param
+                        .is_multiple_of(3)
+                        .then(|| 1.0 + f32::from(p.param % 97)),
                 },
                 SlotInfo {
                     bound: info[s].bound,

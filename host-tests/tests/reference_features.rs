@@ -177,7 +177,11 @@ proptest! {
         fraction in prop_oneof![0.001f32..=0.45, 0.00001f32..=0.001],
         s in samples(4, 29, 300),
     ) {
-        let lp = |cutoff_hz| StageSpec::LowPass { input: name("x"), cutoff_hz };
+        let lp = |cutoff_hz| StageSpec::LowPass {
+            input: name("x"),
+            cutoff_hz,
+            warm_up_ms: None,
+        };
         let cutoffs = [rate * fraction, rate * 0.45];
         let c = features_config(rate, vec![("lp", lp(cutoffs[0])), ("lp2", lp(cutoffs[1]))]);
         let mut max_x: f64 = 0.0;
@@ -266,7 +270,14 @@ proptest! {
         let cutoff_hz = rate * fraction;
         let c = features_config(rate, vec![
             ("hp", StageSpec::HighPass { input: name("x"), cutoff_hz }),
-            ("lp", StageSpec::LowPass { input: name("x"), cutoff_hz }),
+            (
+                "lp",
+                StageSpec::LowPass {
+                    input: name("x"),
+                    cutoff_hz,
+                    warm_up_ms: None,
+                },
+            ),
             ("diff", StageSpec::Difference { a: name("x"), b: name("lp"), gain: 1.0 }),
         ]);
         let mut max_x: f64 = 0.0;
@@ -299,7 +310,14 @@ proptest! {
         };
         let c = features_config(rate, vec![
             ("c", cancel("x", gain)),
-            ("lp", StageSpec::LowPass { input: name("y"), cutoff_hz }),
+            (
+                "lp",
+                StageSpec::LowPass {
+                    input: name("y"),
+                    cutoff_hz,
+                    warm_up_ms: Some(30.0),
+                },
+            ),
             ("zero", cancel("x", 0.0)),
         ]);
         let g = f64::from(gain).abs();
@@ -392,6 +410,7 @@ fn low_pass_by_hand() {
             StageSpec::LowPass {
                 input: name("x"),
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
+                warm_up_ms: None,
             },
         )],
     );
@@ -434,6 +453,7 @@ fn low_pass_and_mean_warm_up_as_the_mean_so_far() {
                 StageSpec::LowPass {
                     input: name("x"),
                     cutoff_hz: 1.0,
+                    warm_up_ms: None,
                 },
             ),
             (
@@ -500,6 +520,7 @@ fn low_pass_follows_a_step_across_the_range() {
             StageSpec::LowPass {
                 input: name("x"),
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
+                warm_up_ms: None,
             },
         )],
     );

@@ -333,7 +333,9 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
         };
         let e = match &f.stage {
             StageSpec::Raw { input } | StageSpec::Abs { input } => d(input),
-            StageSpec::LowPass { input, cutoff_hz } => d(input) + low_pass(*cutoff_hz, m(input)),
+            StageSpec::LowPass {
+                input, cutoff_hz, ..
+            } => d(input) + low_pass(*cutoff_hz, m(input)),
             StageSpec::HighPass { input, cutoff_hz } => {
                 2.0 * d(input) + low_pass(*cutoff_hz, m(input))
             }
