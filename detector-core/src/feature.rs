@@ -1264,9 +1264,9 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
         if st.pos < warm {
             st.pos += 1;
             // n ≥ 2, so 2^31 / n ≤ 2^30 (one 32-bit division, in hardware on the chip).
-            let warm = (1u32 << 31) / u32::from(st.pos);
-            if warm > alpha {
-                gain = warm;
+            let mean_gain = (1u32 << 31) / u32::from(st.pos);
+            if mean_gain > alpha {
+                gain = mean_gain;
             } else {
                 st.pos = WARM_LIMIT;
             }

@@ -288,12 +288,12 @@ impl StageState {
     /// until α weighs more or the warm-up's limit has passed.
     fn low_pass(&mut self, x: f64, alpha: f64, warm: u32) -> f64 {
         self.seen = self.seen.saturating_add(1);
-        let warm = if self.seen <= warm {
+        let mean_gain = if self.seen <= warm {
             1.0 / f64::from(self.seen)
         } else {
             0.0
         };
-        self.y += alpha.max(warm) * (x - self.y);
+        self.y += alpha.max(mean_gain) * (x - self.y);
         self.y
     }
 
@@ -429,8 +429,10 @@ impl Model {
                 } => Stage::LowPass {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                    // Rounded as the configuration's f32 values are (the sample count is
+                    // part of the stage's definition).
                     warm: warm_up_ms.map_or(WARM_LIMIT, |ms| {
-                        ((f64::from(ms) * rate / 1000.0).round() as u32).clamp(1, WARM_LIMIT - 1)
+                        ((ms * config.rate_hz / 1000.0 + 0.5) as u32).clamp(1, WARM_LIMIT - 1)
                     }),
                 },
                 StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {

@@ -188,6 +188,17 @@ fn nan_anywhere() {
         &["feature 'fa'", "cutoff_hz = NaN"],
     );
     assert_eq!(e.item, Item::Feature(name("fa")));
+    let e = reject(
+        |c| {
+            c.features[0].stage = StageSpec::LowPass {
+                input: name("a"),
+                cutoff_hz: 1.0,
+                warm_up_ms: Some(nan),
+            }
+        },
+        &["feature 'fa'", "warm_up_ms = NaN"],
+    );
+    assert_eq!(e.item, Item::Feature(name("fa")));
     let e = reject(|c| c.events[0].onset_level = nan, &["onset_level = NaN"]);
     assert_eq!(e.item, Item::Event(name("e")));
 }
