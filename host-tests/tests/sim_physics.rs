@@ -368,13 +368,7 @@ fn position_error_grows_for_contacts_and_collisions_not_disturbances() {
             let expected = travel * k_link / (k_link + k_loop);
             assert!(g > 0.7 * expected, "{s} seed {seed}: {g} of {expected}");
         }
-        for s in [
-            Scenario::DisturbanceLarge5,
-            Scenario::DisturbanceSmall5,
-            Scenario::DisturbanceSlow2,
-            Scenario::KnockLink1,
-            Scenario::KnockLink2,
-        ] {
+        for s in Scenario::disturbances() {
             let tr = run(s, seed, r);
             let on = onset_row(&tr);
             // Disturbed, then brought back by the controller: at the run's end (30 ms or

@@ -283,6 +283,15 @@ impl Scenario {
         &Scenario::ALL[..18]
     }
 
+    /// The single-event scenarios whose expected event is a disturbance (taps and bursts
+    /// on the tip or a link, knocks), in table order.
+    pub fn disturbances() -> impl Iterator<Item = Scenario> {
+        Scenario::single_event()
+            .iter()
+            .copied()
+            .filter(|s| s.expected() == Some(DISTURBANCE))
+    }
+
     /// The scenario's name, e.g. `contact_hard_8`.
     pub fn name(self) -> &'static str {
         match self {
