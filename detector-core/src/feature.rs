@@ -63,6 +63,15 @@ pub enum StageSpec<N> {
             serde(default, skip_serializing_if = "Option::is_none")
         )]
         warm_up_ms: Option<f32>,
+        /// Ends the warm-up's plain mean early, once another feature rises above a level:
+        /// what follows an event (a structure ringing after a collision) is not the quiet
+        /// the mean assumes, and would weigh 1/n in it. Absent, only `warm_up_ms` and the
+        /// mean's own weight end it.
+        #[cfg_attr(
+            feature = "serde",
+            serde(default, skip_serializing_if = "Option::is_none")
+        )]
+        warm_up_until: Option<Crossing<N>>,
     },
     /// The input's envelope: up with the input at once, down as the
     /// [`StageSpec::LowPass`] at `cutoff_hz` (y = x when x ≥ y, else y += α (x − y)):
@@ -163,6 +172,17 @@ pub enum StageSpec<N> {
     },
 }
 
+/// A feature rising above a level (see [`StageSpec::LowPass`]'s `warm_up_until`).
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+pub struct Crossing<N> {
+    /// The channel or earlier feature watched.
+    pub feature: N,
+    /// The level, in the watched feature's unit; below 32768 in magnitude.
+    pub above: f32,
+}
+
 #[cfg(feature = "serde")]
 fn default_window() -> Window {
     Window::Rectangular
@@ -226,10 +246,18 @@ impl<N> StageSpec<N> {
                 input,
                 cutoff_hz,
                 warm_up_ms,
+                warm_up_until,
             } => StageSpec::LowPass {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
                 warm_up_ms: *warm_up_ms,
+                warm_up_until: match warm_up_until {
+                    Some(l) => Some(Crossing {
+                        feature: f(&l.feature)?,
+                        above: l.above,
+                    }),
+                    None => None,
+                },
             },
             StageSpec::Envelope { input, cutoff_hz } => StageSpec::Envelope {
                 input: f(input)?,
@@ -324,6 +352,11 @@ pub enum StageError {
         /// The longest the detector rate allows, in ms.
         max_ms: f32,
     },
+    /// A level a low-pass's warm-up watches is not finite or not below 32768 in magnitude.
+    Level {
+        /// The requested level.
+        above: f32,
+    },
     /// An STE or mean window is empty or longer than [`MAX_WINDOW`].
     WindowLength {
         /// The requested length.
@@ -350,6 +383,10 @@ impl core::fmt::Display for StageError {
             StageError::WarmUp { warm_up_ms, max_ms } => write!(
                 f,
                 "warm_up_ms = {warm_up_ms} must be above 0 and at most {max_ms} ms (65,534 samples at the detector rate)"
+            ),
+            StageError::Level { above } => write!(
+                f,
+                "above = {above} must be finite and below 32768 in magnitude"
             ),
             StageError::Gain { gain } => write!(
                 f,
@@ -391,11 +428,14 @@ pub enum StageKind {
     Raw(u8),
     Abs(u8),
     /// `alpha` is α in Q31; `warm` the most samples the warm-up's mean counts
-    /// ([`WARM_LIMIT`] when the mean alone ends it).
+    /// ([`WARM_LIMIT`] when the mean alone ends it); the warm-up also ends once slot `until`
+    /// is above `until_above` (Q16.16; `i32::MAX`: never, `until` then the input).
     LowPass {
         input: u8,
         alpha: u32,
         warm: u16,
+        until: u8,
+        until_above: i32,
     },
     /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`].
     Envelope {
@@ -573,11 +613,20 @@ impl Stage {
                 input,
                 cutoff_hz,
                 warm_up_ms,
-            } => StageKind::LowPass {
-                input,
-                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
-                warm: warm_up_samples(rate_hz, warm_up_ms)?,
-            },
+                ref warm_up_until,
+            } => {
+                let (until, until_above) = match *warm_up_until {
+                    Some(Crossing { feature, above }) => (feature, level_q16(above)?),
+                    None => (input, i32::MAX),
+                };
+                StageKind::LowPass {
+                    input,
+                    alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+                    warm: warm_up_samples(rate_hz, warm_up_ms)?,
+                    until,
+                    until_above,
+                }
+            }
             StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
@@ -657,7 +706,18 @@ impl Stage {
         match self.0 {
             StageKind::Raw(i) => get(i),
             StageKind::Abs(i) => get(i).saturating_abs(),
-            StageKind::LowPass { input, alpha, warm } => low_pass(st, get(input), alpha, warm),
+            StageKind::LowPass {
+                input,
+                alpha,
+                warm,
+                until,
+                until_above,
+            } => {
+                if st.primed && get(until) > until_above {
+                    st.pos = WARM_LIMIT;
+                }
+                low_pass(st, get(input), alpha, warm)
+            }
             StageKind::Envelope { input, alpha } => {
                 let x = get(input);
                 // Compared at the state's full resolution, not the output's: an input
@@ -856,11 +916,19 @@ impl Stage {
                 w.u8(StageTag::Abs as u8);
                 w.u8(i);
             }
-            StageKind::LowPass { input, alpha, warm } => {
+            StageKind::LowPass {
+                input,
+                alpha,
+                warm,
+                until,
+                until_above,
+            } => {
                 w.u8(StageTag::LowPass as u8);
                 w.u8(input);
                 w.u32(alpha);
                 w.u16(warm);
+                w.u8(until);
+                w.u32(until_above as u32);
             }
             StageKind::HighPass { input, alpha } => {
                 w.u8(StageTag::HighPass as u8);
@@ -942,6 +1010,8 @@ impl Stage {
                 input: r.u8()?,
                 alpha: r.u32()?,
                 warm: r.u16()?,
+                until: r.u8()?,
+                until_above: r.u32()? as i32,
             },
             Some(StageTag::HighPass) => StageKind::HighPass {
                 input: r.u8()?,
@@ -1008,7 +1078,6 @@ impl StageKind {
         let inputs_ok = match *self {
             StageKind::Raw(i)
             | StageKind::Abs(i)
-            | StageKind::LowPass { input: i, .. }
             | StageKind::Envelope { input: i, .. }
             | StageKind::HighPass { input: i, .. }
             | StageKind::Rate { input: i, .. }
@@ -1016,6 +1085,9 @@ impl StageKind {
             | StageKind::Ste { input: i, .. } => (i as usize) < slots,
             StageKind::Difference { a, b, .. }
             | StageKind::Magnitude(a, b)
+            | StageKind::LowPass {
+                input: a, until: b, ..
+            }
             | StageKind::Cancel {
                 input: a,
                 motion: b,
@@ -1122,10 +1194,16 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
         match self.0.0 {
             StageKind::Raw(i) => write!(f, "Raw({i})"),
             StageKind::Abs(i) => write!(f, "Abs({i})"),
-            StageKind::LowPass { input, alpha, warm } => {
+            StageKind::LowPass {
+                input,
+                alpha,
+                warm,
+                until,
+                until_above,
+            } => {
                 write!(
                     f,
-                    "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm} }}"
+                    "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm}, until: {until}, until_above: {until_above} }}"
                 )
             }
             StageKind::HighPass { input, alpha } => {
@@ -1231,6 +1309,16 @@ fn warm_up_samples(rate_hz: f32, warm_up_ms: Option<f32>) -> Result<u16, StageEr
     }
     let samples = (ms * rate_hz / 1000.0 + 0.5) as u16;
     Ok(samples.clamp(1, WARM_LIMIT - 1))
+}
+
+/// A level in Q16.16, as a [`Signal`](crate::Signal) converts it: finite and below 32768
+/// in magnitude.
+fn level_q16(above: f32) -> Result<i32, StageError> {
+    if above.is_finite() && above.abs() < 32768.0 {
+        Ok(crate::Signal::from_f32(above).to_bits())
+    } else {
+        Err(StageError::Level { above })
+    }
 }
 
 /// A cancellation gain in Q16.16, as a [`Signal`](crate::Signal) converts it: finite,
@@ -1450,6 +1538,7 @@ mod tests {
                 input: 0,
                 cutoff_hz: 50.0,
                 warm_up_ms: None,
+                warm_up_until: None,
             },
             &[&x],
         );
@@ -1462,6 +1551,7 @@ mod tests {
                 input: 0,
                 cutoff_hz: 50.0,
                 warm_up_ms: None,
+                warm_up_until: None,
             },
             &[&step],
         );
@@ -1485,6 +1575,7 @@ mod tests {
             input: 0,
             cutoff_hz: 1.0,
             warm_up_ms,
+            warm_up_until: None,
         };
         let mut x = vec![0.0; 10];
         x.extend([100.0; 30]);
@@ -1502,6 +1593,43 @@ mod tests {
             limited[39]
         );
         assert!((unlimited[39] - 75.0).abs() < 1e-3, "{}", unlimited[39]);
+    }
+
+    /// A watched feature rising above its level ends the warm-up's plain mean: what comes
+    /// after is learnt at α, as after `warm_up_ms`. Before it rises, and on the first
+    /// sample, the mean goes on.
+    #[test]
+    fn low_pass_warm_up_ends_when_its_watched_feature_rises() {
+        // 1 Hz at 1 kHz: α = 0.0062, below 1/n for the first 160 samples.
+        let spec = StageSpec::LowPass {
+            input: 0,
+            cutoff_hz: 1.0,
+            warm_up_ms: None,
+            warm_up_until: Some(Crossing {
+                feature: 1,
+                above: 0.5,
+            }),
+        };
+        let mut x = vec![0.0; 10];
+        x.extend([100.0; 30]);
+        let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI));
+        // The watched input rises with the step (exactly 0.5 is not above the level).
+        let mut rises = vec![0.5; 10];
+        rises.extend([1.0; 30]);
+        let ended = run(spec.clone(), &[&x, &rises]);
+        assert_eq!(ended[9], 0.0);
+        let expected = 100.0 * (1.0 - (1.0 - alpha).powi(30));
+        assert!(
+            (ended[39] - expected).abs() < 1e-3,
+            "{} vs {expected}",
+            ended[39]
+        );
+        // Never above its level: the plain mean of all 40 samples.
+        let quiet = run(spec.clone(), &[&x, &[0.0; 40]]);
+        assert!((quiet[39] - 75.0).abs() < 1e-3, "{}", quiet[39]);
+        // Above it from the first sample: the first sample still sets the output.
+        let at_once = run(spec, &[&[3.0; 2], &[1.0; 2]]);
+        assert_eq!(at_once[0], 3.0);
     }
 
     /// The low-pass output lies between its input and its last output, so it needs no
@@ -1651,7 +1779,8 @@ mod tests {
             compile(StageSpec::LowPass {
                 input: 0,
                 cutoff_hz: 600.0,
-                warm_up_ms: None
+                warm_up_ms: None,
+                warm_up_until: None,
             }),
             Err(StageError::Cutoff {
                 cutoff_hz: 600.0,
@@ -1662,7 +1791,8 @@ mod tests {
             compile(StageSpec::LowPass {
                 input: 0,
                 cutoff_hz: f32::NAN,
-                warm_up_ms: None
+                warm_up_ms: None,
+                warm_up_until: None,
             })
             .is_err()
         );
@@ -1672,18 +1802,33 @@ mod tests {
                 compile(StageSpec::LowPass {
                     input: 0,
                     cutoff_hz: 1.0,
-                    warm_up_ms: Some(warm_up_ms)
+                    warm_up_ms: Some(warm_up_ms),
+                    warm_up_until: None,
                 })
                 .map_err(|e| matches!(e, StageError::WarmUp { max_ms, .. } if max_ms == 65_534.0)),
                 Err(true),
                 "{warm_up_ms}"
             );
         }
+        for above in [f32::NAN, f32::INFINITY, 32_768.0, -32_768.0] {
+            assert_eq!(
+                compile(StageSpec::LowPass {
+                    input: 0,
+                    cutoff_hz: 1.0,
+                    warm_up_ms: None,
+                    warm_up_until: Some(Crossing { feature: 1, above }),
+                })
+                .map_err(|e| matches!(e, StageError::Level { .. })),
+                Err(true),
+                "{above}"
+            );
+        }
         assert!(
             compile(StageSpec::LowPass {
                 input: 0,
                 cutoff_hz: 1.0,
-                warm_up_ms: Some(65_534.0)
+                warm_up_ms: Some(65_534.0),
+                warm_up_until: None,
             })
             .is_ok()
         );

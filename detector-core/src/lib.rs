@@ -18,7 +18,7 @@ pub mod __private;
 
 pub use cdf::{Cdf, CdfError, CdfSpec};
 pub use detector::{Detector, TermConfidences};
-pub use feature::{Stage, StageError, StageSpec, Window};
+pub use feature::{Crossing, Stage, StageError, StageSpec, Window};
 pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 pub use state::{
@@ -33,7 +33,7 @@ pub type Name = heapless::String<NAME_LEN>;
 /// Most input channels a configuration may declare.
 pub const MAX_CHANNELS: usize = 16;
 /// Most features a configuration may declare.
-pub const MAX_FEATURES: usize = 32;
+pub const MAX_FEATURES: usize = 64;
 /// Most events a configuration may declare.
 pub const MAX_EVENTS: usize = 8;
 /// Most phases a configuration may declare.

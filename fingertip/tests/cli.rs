@@ -1311,8 +1311,8 @@ fn a_flight_recording_replays_from_its_saved_state() {
 
     // Another detector's state (a shorter one) is refused, naming the metadata.
     let bad = text(&std::fs::read(&path).expect("read")).replacen(
-        "# state: 46545331",
-        "# state: 4654533100",
+        "# state: 46545332",
+        "# state: 4654533200",
         1,
     );
     std::fs::write(&path, bad).expect("write");
@@ -1320,7 +1320,7 @@ fn a_flight_recording_replays_from_its_saved_state() {
     let stderr = text(&out.stderr);
     assert!(!out.status.success());
     assert!(
-        stderr.contains("metadata 'state'") && stderr.contains("3005 bytes"),
+        stderr.contains("metadata 'state'") && stderr.contains("3741 bytes"),
         "{stderr}"
     );
 }

@@ -50,7 +50,7 @@
 //!   in event order), the other's levels are held down.
 
 use detector_build::Config;
-use detector_core::{CdfSpec, Level, StageSpec, Window};
+use detector_core::{CdfSpec, Level, Signal, StageSpec, Window};
 
 /// The largest value of the core's 16.16 `Signal`, 32768 − 2⁻¹⁶.
 pub const SIGNAL_MAX: f64 = 32768.0 - 1.0 / 65536.0;
@@ -186,6 +186,8 @@ enum Stage {
         alpha: f64,
         /// The most samples the warm-up's mean counts.
         warm: u32,
+        /// The warm-up ends once this slot is above the level.
+        until: Option<(usize, f64)>,
     },
     HighPass {
         input: usize,
@@ -426,6 +428,7 @@ impl Model {
                     input,
                     cutoff_hz,
                     warm_up_ms,
+                    warm_up_until,
                 } => Stage::LowPass {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
@@ -434,6 +437,8 @@ impl Model {
                     warm: warm_up_ms.map_or(WARM_LIMIT, |ms| {
                         ((ms * config.rate_hz / 1000.0 + 0.5) as u32).clamp(1, WARM_LIMIT - 1)
                     }),
+                    // The level as the core holds it (16.16).
+                    until: warm_up_until.map(|l| (l.feature, Signal::from_f32(l.above).to_f64())),
                 },
                 StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
                     input,
@@ -603,7 +608,20 @@ impl Model {
             let value = match stage {
                 Stage::Raw(i) => v(*i),
                 Stage::Abs(i) => v(*i).abs(),
-                Stage::LowPass { input, alpha, warm } => st.low_pass(v(*input), *alpha, *warm),
+                Stage::LowPass {
+                    input,
+                    alpha,
+                    warm,
+                    until,
+                } => {
+                    if let Some((u, above)) = until
+                        && st.seen > 0
+                        && v(*u) > *above
+                    {
+                        st.seen = u32::MAX;
+                    }
+                    st.low_pass(v(*input), *alpha, *warm)
+                }
                 Stage::HighPass { input, alpha } => {
                     let x = v(*input);
                     x - st.low_pass(x, *alpha, WARM_LIMIT)

@@ -8,7 +8,7 @@ mod support;
 
 use detector_build::LoadError;
 use detector_build::{Config, ConfigError, Item, Problem, Warning};
-use detector_core::{CdfError, CdfSpec, StageError, StageSpec, Window};
+use detector_core::{CdfError, CdfSpec, Crossing, StageError, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -183,6 +183,7 @@ fn nan_anywhere() {
                 input: name("a"),
                 cutoff_hz: nan,
                 warm_up_ms: None,
+                warm_up_until: None,
             }
         },
         &["feature 'fa'", "cutoff_hz = NaN"],
@@ -194,6 +195,7 @@ fn nan_anywhere() {
                 input: name("a"),
                 cutoff_hz: 1.0,
                 warm_up_ms: Some(nan),
+                warm_up_until: None,
             }
         },
         &["feature 'fa'", "warm_up_ms = NaN"],
@@ -231,6 +233,7 @@ fn infinity_anywhere() {
                 input: name("b"),
                 cutoff_hz: inf,
                 warm_up_ms: None,
+                warm_up_until: None,
             }
         },
         &["feature 'fb'", "cutoff_hz = inf"],
@@ -261,6 +264,37 @@ fn an_unknown_channel() {
         &["feature 'fa'", "'fb'"],
     );
     assert_eq!(e.problem, Problem::UnknownInput(name("fb")));
+    // So may the feature a low-pass's warm-up watches.
+    let until = |feature: &str, above: f32| StageSpec::LowPass {
+        input: name("a"),
+        cutoff_hz: 1.0,
+        warm_up_ms: None,
+        warm_up_until: Some(Crossing {
+            feature: name(feature),
+            above,
+        }),
+    };
+    let e = reject(
+        |c| c.features[0].stage = until("fb", 1.0),
+        &["feature 'fa'", "'fb'"],
+    );
+    assert_eq!(e.problem, Problem::UnknownInput(name("fb")));
+    // Its level must be finite and within the 16.16 range.
+    for above in [f32::NAN, 40000.0] {
+        let e = reject(
+            |c| c.features[0].stage = until("b", above),
+            &["feature 'fa'", "above = "],
+        );
+        assert_eq!(e.item, Item::Feature(name("fa")));
+        assert!(
+            matches!(e.problem, Problem::Stage(StageError::Level { .. })),
+            "{e:?}"
+        );
+    }
+    // A channel's crossing is accepted.
+    let mut config = good();
+    config.features[0].stage = until("b", 1.0);
+    assert!(detector_build::build(&config).is_ok());
 }
 
 #[test]
@@ -449,6 +483,7 @@ fn other_rules() {
                 input: name("a"),
                 cutoff_hz: 500.0,
                 warm_up_ms: None,
+                warm_up_until: None,
             }
         },
         &["cutoff_hz = 500", "500 Hz"],

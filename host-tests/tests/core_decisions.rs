@@ -392,6 +392,7 @@ fn faults_follow_feature_chains() {
                     input: name("d"),
                     cutoff_hz: 100.0,
                     warm_up_ms: None,
+                    warm_up_until: None,
                 },
             ),
             ("fx", raw("x")),

@@ -27,7 +27,7 @@ mod support;
 use detector_build::{
     ChannelSpec, Config, ContextTerm, EventSpec, FeatureSpec, LevelSpec, PhaseSpec, SensorTerm,
 };
-use detector_core::{Cdf, CdfSpec, Detector, EventId, Signal, StageSpec, Window};
+use detector_core::{Cdf, CdfSpec, Crossing, Detector, EventId, Signal, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -112,12 +112,14 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
         (
             n(),
             prop_oneof![1 => any_f32(), 12 => 0.1f32..4.9, 2 => 0.1f32..3000.0],
-            prop::option::of(prop_oneof![1 => any_f32(), 6 => 0.1f32..200.0])
+            prop::option::of(prop_oneof![1 => any_f32(), 6 => 0.1f32..200.0]),
+            prop::option::of((n(), any_f32())),
         )
-            .prop_map(|(input, cutoff_hz, warm_up_ms)| StageSpec::LowPass {
+            .prop_map(|(input, cutoff_hz, warm_up_ms, until)| StageSpec::LowPass {
                 input,
                 cutoff_hz,
-                warm_up_ms
+                warm_up_ms,
+                warm_up_until: until.map(|(feature, above)| Crossing { feature, above }),
             }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
@@ -481,6 +483,10 @@ proptest! {
                     input: p(0),
                     cutoff_hz: *cutoff,
                     warm_up_ms: k.is_multiple_of(2).then_some(5.0),
+                    warm_up_until: k.is_multiple_of(3).then(|| Crossing {
+                        feature: p(1),
+                        above: *cutoff - 200.0,
+                    }),
                 },
                 3 => StageSpec::Rate { input: p(0) },
                 4 => StageSpec::Difference { a: p(0), b: p(1), gain: *cutoff - 200.0 },

@@ -7,7 +7,9 @@
 mod support;
 
 use detector_build::Config;
-use detector_core::{Detector, Inputs, Output, SAVED_MAGIC, Signal, State, StateError};
+use detector_core::{
+    Detector, Inputs, MAX_CHANNELS, MAX_FEATURES, Output, SAVED_MAGIC, Signal, State, StateError,
+};
 use proptest::prelude::*;
 use support::{cases, proptest_config};
 
@@ -81,7 +83,8 @@ fn a_restored_state_resumes_bit_for_bit() {
 
 /// Offsets in the saved form (docs/trace-format.md).
 const PHASE: usize = 4;
-const STAGES: usize = PHASE + 1 + 4 * 64;
+// The slot values: channels then features, a power of two of them.
+const STAGES: usize = PHASE + 1 + 4 * (MAX_CHANNELS + MAX_FEATURES).next_power_of_two();
 const STAGE_BYTES: usize = 15;
 
 fn saved_after(detector: &Detector, ticks: u32) -> Vec<u8> {

@@ -66,7 +66,7 @@ mod support;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use detector_build::{Config, EventSpec};
-use detector_core::{CdfSpec, Signal, StageSpec, Window};
+use detector_core::{CdfSpec, Crossing, Signal, StageSpec, Window};
 use host_tests::reference::{Model, cdf};
 use proptest::prelude::*;
 use support::*;
@@ -269,6 +269,14 @@ fn stage_for(
                         .param
                         .is_multiple_of(3)
                         .then(|| 1.0 + f32::from(p.param % 97)),
+                    // Half end their warm-up early when an exact slot (the same value in
+                    // both models) rises above a level within its usual range.
+                    warm_up_until: (p.param.is_multiple_of(2) && info[pick(1)].exact).then(|| {
+                        Crossing {
+                            feature: n(pick(1)),
+                            above: f32::from(p.picks[2]) - 128.0,
+                        }
+                    }),
                 },
                 SlotInfo {
                     bound: info[s].bound,

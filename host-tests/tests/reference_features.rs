@@ -181,6 +181,7 @@ proptest! {
             input: name("x"),
             cutoff_hz,
             warm_up_ms: None,
+            warm_up_until: None,
         };
         let cutoffs = [rate * fraction, rate * 0.45];
         let c = features_config(rate, vec![("lp", lp(cutoffs[0])), ("lp2", lp(cutoffs[1]))]);
@@ -276,6 +277,7 @@ proptest! {
                     input: name("x"),
                     cutoff_hz,
                     warm_up_ms: None,
+                    warm_up_until: None,
                 },
             ),
             ("diff", StageSpec::Difference { a: name("x"), b: name("lp"), gain: 1.0 }),
@@ -316,6 +318,7 @@ proptest! {
                     input: name("y"),
                     cutoff_hz,
                     warm_up_ms: Some(30.0),
+                    warm_up_until: None,
                 },
             ),
             ("zero", cancel("x", 0.0)),
@@ -411,6 +414,7 @@ fn low_pass_by_hand() {
                 input: name("x"),
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
                 warm_up_ms: None,
+                warm_up_until: None,
             },
         )],
     );
@@ -454,6 +458,7 @@ fn low_pass_and_mean_warm_up_as_the_mean_so_far() {
                     input: name("x"),
                     cutoff_hz: 1.0,
                     warm_up_ms: None,
+                    warm_up_until: None,
                 },
             ),
             (
@@ -521,6 +526,7 @@ fn low_pass_follows_a_step_across_the_range() {
                 input: name("x"),
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
                 warm_up_ms: None,
+                warm_up_until: None,
             },
         )],
     );
