@@ -713,7 +713,10 @@ impl Stage {
                 until,
                 until_above,
             } => {
-                if st.primed && get(until) > until_above {
+                // Ends only a warm-up still running. The level comes first: without a watched
+                // slot it is i32::MAX, and generated code drops the test. The first sample
+                // primes the filter whatever `pos` says.
+                if get(until) > until_above && st.pos < warm {
                     st.pos = WARM_LIMIT;
                 }
                 low_pass(st, get(input), alpha, warm)

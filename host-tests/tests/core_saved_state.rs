@@ -7,9 +7,8 @@
 mod support;
 
 use detector_build::Config;
-use detector_core::{
-    Detector, Inputs, MAX_CHANNELS, MAX_FEATURES, Output, SAVED_MAGIC, Signal, State, StateError,
-};
+use detector_core::feature::MAX_SLOTS;
+use detector_core::{Detector, Inputs, Output, SAVED_MAGIC, Signal, State, StateError};
 use proptest::prelude::*;
 use support::{cases, proptest_config};
 
@@ -83,8 +82,7 @@ fn a_restored_state_resumes_bit_for_bit() {
 
 /// Offsets in the saved form (docs/trace-format.md).
 const PHASE: usize = 4;
-// The slot values: channels then features, a power of two of them.
-const STAGES: usize = PHASE + 1 + 4 * (MAX_CHANNELS + MAX_FEATURES).next_power_of_two();
+const STAGES: usize = PHASE + 1 + 4 * MAX_SLOTS;
 const STAGE_BYTES: usize = 15;
 
 fn saved_after(detector: &Detector, ticks: u32) -> Vec<u8> {
