@@ -746,10 +746,8 @@ impl Stage {
                 gain,
             } => {
                 let y = low_pass(st, get(motion), alpha, WARM_LIMIT);
-                // |y| ≤ 2^31 and |gain| < 2^31: the product fits in 63 bits, and the
-                // difference in 64; it saturates once, at the end.
-                let predicted = (i64::from(y) * i64::from(gain)) >> 16;
-                sat32(i64::from(get(input)) - predicted)
+                // It saturates once, at the end.
+                sat32(i64::from(get(input)) - scale_q16(y, gain))
             }
             StageKind::Rate { input, rate } => {
                 let x = get(input);
@@ -765,9 +763,7 @@ impl Stage {
                 out
             }
             StageKind::Difference { a, b, gain } => {
-                // |b · gain| < 2^62, so the scaled subtrahend and the difference fit.
-                let scaled = (i64::from(get(b)) * i64::from(gain)) >> 16;
-                sat32(i64::from(get(a)) - scaled)
+                sat32(i64::from(get(a)) - scale_q16(get(b), gain))
             }
             StageKind::Dot([ax, ay, bx, by]) => {
                 let p = i64::from(get(ax)) * i64::from(get(bx));
@@ -1369,6 +1365,16 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
     (st.acc >> 16) as i32
 }
 
+/// `x · gain >> 16` exactly, for a 16.16 `gain`: the gain's whole part and its fraction
+/// apart. The product of a whole number is exact, so for a gain such as −1 or 4 the
+/// compiler of a generated tick drops the fraction's multiplication and the shift, and a
+/// unit gain leaves one saturating addition. |x · gain| < 2^62: the sum fits.
+#[inline(always)]
+fn scale_q16(x: i32, gain: i32) -> i64 {
+    let (whole, fraction) = (i64::from(gain >> 16), i64::from(gain & 0xffff));
+    i64::from(x) * whole + ((i64::from(x) * fraction) >> 16)
+}
+
 /// Saturates to the `i32` range.
 #[inline]
 fn sat32(v: i64) -> i32 {
@@ -1633,6 +1639,48 @@ mod tests {
         // Above it from the first sample: the first sample still sets the output.
         let at_once = run(spec, &[&[3.0; 2], &[1.0; 2]]);
         assert_eq!(at_once[0], 3.0);
+    }
+
+    /// The gain taken apart into its whole part and its fraction scales exactly as one
+    /// 48-bit product shifted down: every sign, the extremes, whole and fractional gains.
+    #[test]
+    fn scaling_by_parts_is_the_whole_product() {
+        let values = [
+            i32::MIN,
+            i32::MIN + 1,
+            -65_537,
+            -65_536,
+            -1,
+            0,
+            1,
+            65_535,
+            i32::MAX,
+        ];
+        let gains = [
+            i32::MIN + 1,
+            -6_553_600,
+            -229_376,
+            -65_536,
+            -983,
+            -1,
+            0,
+            1,
+            983,
+            65_535,
+            65_536,
+            262_144,
+            8_692,
+            i32::MAX,
+        ];
+        for x in values {
+            for gain in gains {
+                assert_eq!(
+                    scale_q16(x, gain),
+                    (i64::from(x) * i64::from(gain)) >> 16,
+                    "{x} · {gain}"
+                );
+            }
+        }
     }
 
     /// The low-pass output lies between its input and its last output, so it needs no
