@@ -46,8 +46,9 @@ pub enum StageSpec<N> {
     /// what it has seen: the n-th sample weighs max(α, 1/n), so the output starts at the
     /// first sample (a channel's offset does not look like a step) and is the plain mean of
     /// the samples so far until that mean would forget more slowly than the filter (at most
-    /// the first 65,535 samples), or until `warm_up_ms` has passed. The state keeps 32
-    /// fraction bits.
+    /// the first 65,535 samples), or until `warm_up_ms` has passed. The state keeps 31
+    /// bits below the output's last; x − y saturates to the feature range, which cuts only
+    /// a step from one end of the range to the other.
     LowPass {
         /// Source channel or feature.
         input: N,
@@ -490,7 +491,7 @@ pub enum StageKind {
 /// Per-feature running state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct StageState {
-    /// Low-pass output in Q32, or a window's running sum (of squares for STE, below 2⁴⁶; of
+    /// A filter's output times 2³¹ plus the fraction below its last bit, or a window's running sum (of squares for STE, below 2⁴⁶; of
     /// inputs for a mean, below 2³⁸ in magnitude; Q16).
     acc: i64,
     /// The previous input (rate).
@@ -568,7 +569,7 @@ impl Stage {
             StageKind::LowPass { .. }
             | StageKind::Envelope { .. }
             | StageKind::HighPass { .. }
-            | StageKind::Cancel { .. } => i32::try_from(st.acc >> 16).is_ok(),
+            | StageKind::Cancel { .. } => i32::try_from(st.acc >> 31).is_ok(),
             StageKind::Mean { offset, len, .. } => {
                 let limit = i64::from(len) << 31;
                 window(offset, len).is_some_and(|h| {
@@ -725,15 +726,13 @@ impl Stage {
                 let x = get(input);
                 // Compared at the state's full resolution, not the output's: an input
                 // between the two decays the state instead of snapping it down.
-                if !st.primed || i64::from(x) << 16 >= st.acc {
+                if !st.primed || i64::from(x) << 31 >= st.acc {
                     st.primed = true;
-                    st.acc = i64::from(x) << 16;
+                    st.acc = i64::from(x) << 31;
                 } else {
-                    // As the low-pass after its warm-up: |diff| < 2^32, alpha < 2^31.
-                    let diff = i64::from(x) - (st.acc >> 16);
-                    st.acc += (diff * i64::from(alpha)) >> 15;
+                    filter_step(st, x, alpha);
                 }
-                (st.acc >> 16) as i32
+                (st.acc >> 31) as i32
             }
             StageKind::HighPass { input, alpha } => {
                 let x = get(input);
@@ -1331,21 +1330,16 @@ fn gain_q16(gain: f32) -> Result<i32, StageError> {
     }
 }
 
-/// One tick of the first-order low-pass y += g (x − y), the state in Q32, the gain g in
-/// Q31: α, or while the filter warms up 1/n for its n-th sample, whichever is larger (the
-/// first sample sets y; until 1/n falls below α, y is the mean of the samples so far, to
-/// within the rounding of 1/n). The warm-up counts at most `warm` samples (at most
-/// [`WARM_LIMIT`]).
-///
-/// The output needs no saturation: with y = ⌊acc / 2¹⁶⌋ and 0 < g < 1, a step down adds
-/// ⌊(x − y) 2¹⁶ g⌋ ≥ (x − y) 2¹⁶, a step up less than (x − y) 2¹⁶, so the new y lies
-/// between x and the old y, inside the `i32` range (a property test holds it there).
+/// One tick of the first-order low-pass y += g (x − y), the gain g in Q31: α, or while the
+/// filter warms up 1/n for its n-th sample, whichever is larger (the first sample sets y;
+/// until 1/n falls below α, y is the mean of the samples so far, to within the rounding of
+/// 1/n). The warm-up counts at most `warm` samples (at most [`WARM_LIMIT`]).
 #[inline(always)]
 fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
     if !st.primed {
         st.primed = true;
         st.pos = 1;
-        st.acc = i64::from(x) << 16;
+        st.acc = i64::from(x) << 31;
     } else {
         let mut gain = alpha;
         if st.pos < warm {
@@ -1358,11 +1352,25 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
                 st.pos = WARM_LIMIT;
             }
         }
-        // |diff| < 2^32 and gain < 2^31, so the product fits in 63 bits.
-        let diff = i64::from(x) - (st.acc >> 16);
-        st.acc += (diff * i64::from(gain)) >> 15;
+        filter_step(st, x, gain);
     }
-    (st.acc >> 16) as i32
+    (st.acc >> 31) as i32
+}
+
+/// Moves a filter's state towards `x` by the Q31 `gain` (0 < g < 1): acc += g (x − y), the
+/// state holding y · 2³¹ plus the fraction below y's last bit, so that the step is one
+/// multiply-accumulate.
+///
+/// y needs no saturation: the difference is an integer d, and g d lies strictly between 0
+/// and d, so the new ⌊acc / 2³¹⌋ lies between x and the old y, inside the `i32` range (a
+/// property test holds it there). The difference saturates only for an input more than
+/// 2³¹ steps away; it keeps its sign, so y still moves towards x. |acc| ≤ 2⁶² and
+/// |d g| < 2⁶²: the sum fits. Every gain is below 2³¹ (α is checked so, 1/n is at most ½);
+/// the mask says so to the compiler, which then multiplies and adds in one instruction.
+#[inline(always)]
+fn filter_step(st: &mut StageState, x: i32, gain: u32) {
+    let diff = x.saturating_sub((st.acc >> 31) as i32);
+    st.acc += i64::from(diff) * i64::from(gain & 0x7fff_ffff);
 }
 
 /// `x · gain >> 16` exactly, for a 16.16 `gain`: the gain's whole part and its fraction
@@ -1707,7 +1715,7 @@ mod tests {
                 let y = low_pass(&mut st, x, alpha, WARM_LIMIT);
                 assert_eq!(
                     i64::from(y),
-                    st.acc >> 16,
+                    st.acc >> 31,
                     "alpha {alpha}: the state left the range"
                 );
                 assert!(

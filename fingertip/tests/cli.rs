@@ -1310,9 +1310,13 @@ fn a_flight_recording_replays_from_its_saved_state() {
     );
 
     // Another detector's state (a shorter one) is refused, naming the metadata.
+    let magic: String = detector_core::SAVED_MAGIC
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
     let bad = text(&std::fs::read(&path).expect("read")).replacen(
-        "# state: 46545332",
-        "# state: 4654533200",
+        &format!("# state: {magic}"),
+        &format!("# state: {magic}00"),
         1,
     );
     std::fs::write(&path, bad).expect("write");

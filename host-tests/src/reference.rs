@@ -26,7 +26,9 @@
 //!   plateau, 1 − S((x − plateau_high)/(high − plateau_high)) on the falling one, 0
 //!   outside [low, high]; binary 1 when x ≥ threshold (`above`) or x ≤ threshold.
 //! - **Features** ([`Model::tick`]): raw, |x|, low-pass y ← y + α(x − y) with
-//!   α = Δt/(τ + Δt), τ = 1/(2π f_c), seeded with the first sample (the documentation does
+//!   α = Δt/(τ + Δt), τ = 1/(2π f_c), x − y saturated to the feature range (±32768, as
+//!   every difference of the engine's; it cuts only a step from one end of the range to the
+//!   other), seeded with the first sample (the documentation does
 //!   not say where y starts; the engine seeds it, and a filter starting at 0 would only add
 //!   a start-up transient); high-pass x − y; cancel x − g y with y the low-pass of the
 //!   motion input; rate (x_n − x_{n−1}) f_s, 0 on the first tick; a − b;
@@ -281,6 +283,12 @@ struct StageState {
     seen: u32,
 }
 
+/// A filter's step towards its input, x − y, saturated to the feature range as the
+/// engine's is: only a step from one end of the range to the other is cut.
+fn range_step(d: f64) -> f64 {
+    d.clamp(Signal::MIN.to_f64(), Signal::MAX.to_f64())
+}
+
 /// The most samples a low-pass warms up over.
 const WARM_LIMIT: u32 = 65535;
 
@@ -295,7 +303,7 @@ impl StageState {
         } else {
             0.0
         };
-        self.y += alpha.max(mean_gain) * (x - self.y);
+        self.y += alpha.max(mean_gain) * range_step(x - self.y);
         self.y
     }
 
@@ -632,7 +640,7 @@ impl Model {
                     st.y = if st.seen == 1 || x >= st.y {
                         x
                     } else {
-                        st.y + alpha * (x - st.y)
+                        st.y + alpha * range_step(x - st.y)
                     };
                     st.y
                 }

@@ -514,7 +514,9 @@ fn ste_of_a_large_sample_saturates_only_at_the_signal_range() {
     assert_eq!(alone[0].0[0], Signal::MAX.to_f64(), "{:?}", alone[0]);
 }
 
-/// Documented: y += α (x − y). From y = 30000, x = −30000 at α = ½ gives 0, then −15000.
+/// Documented: y += α (x − y), x − y saturated to the feature range. From y = 30000,
+/// x = −30000 at α = ½: the step of −60000 is cut to −32768, giving 13616; then −43616 is
+/// cut again, giving −2768; then −27232 is whole, giving −16384.
 #[test]
 fn low_pass_follows_a_step_across_the_range() {
     let rate = 1000.0f32;
@@ -530,8 +532,8 @@ fn low_pass_follows_a_step_across_the_range() {
             },
         )],
     );
-    let s = [30000, -30000, -30000].map(|v| [v << 16, 0, 0, 0]);
-    let want = [30000.0, 0.0, -15000.0];
+    let s = [30000, -30000, -30000, -30000].map(|v| [v << 16, 0, 0, 0]);
+    let want = [30000.0, 13616.0, -2768.0, -16384.0];
     for (t, (got, model)) in run(&c, &s).into_iter().enumerate() {
         // α is ½ to within f32 rounding of the cut-off: a few 10⁻³ at this scale.
         assert!(
