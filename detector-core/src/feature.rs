@@ -491,8 +491,9 @@ pub enum StageKind {
 /// Per-feature running state.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub(crate) struct StageState {
-    /// A filter's output times 2³¹ plus the fraction below its last bit, or a window's running sum (of squares for STE, below 2⁴⁶; of
-    /// inputs for a mean, below 2³⁸ in magnitude; Q16).
+    /// A filter's output times 2³¹ plus the fraction below its last bit, or a window's
+    /// running sum (of squares for STE, below 2⁴⁶; of inputs for a mean, below 2³⁸ in
+    /// magnitude; Q16).
     acc: i64,
     /// The previous input (rate).
     prev: i32,
