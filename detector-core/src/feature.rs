@@ -1650,8 +1650,8 @@ mod tests {
         assert_eq!(at_once[0], 3.0);
     }
 
-    /// The gain taken apart into its whole part and its fraction scales exactly as one
-    /// 48-bit product shifted down: every sign, the extremes, whole and fractional gains.
+    /// The gain taken apart into its whole part and its fraction scales exactly as the
+    /// whole product shifted down: every sign, the extremes, whole and fractional gains.
     #[test]
     fn scaling_by_parts_is_the_whole_product() {
         let values = [
