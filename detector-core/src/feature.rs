@@ -1310,25 +1310,22 @@ fn warm_up_samples(rate_hz: f32, warm_up_ms: Option<f32>) -> Result<u16, StageEr
     Ok(samples.clamp(1, WARM_LIMIT - 1))
 }
 
-/// A level in Q16.16, as a [`Signal`](crate::Signal) converts it: finite and below 32768
-/// in magnitude.
-fn level_q16(above: f32) -> Result<i32, StageError> {
-    if above.is_finite() && above.abs() < 32768.0 {
-        Ok(crate::Signal::from_f32(above).to_bits())
-    } else {
-        Err(StageError::Level { above })
-    }
+/// A parameter in Q16.16, as a [`Signal`](crate::Signal) converts it, when it is finite
+/// and below 32768 in magnitude.
+fn q16(v: f32) -> Option<i32> {
+    (v.is_finite() && v.abs() < 32768.0).then(|| crate::Signal::from_f32(v).to_bits())
 }
 
-/// A cancellation gain in Q16.16, as a [`Signal`](crate::Signal) converts it: finite,
-/// |gain| < 32768, and zero or at least one step.
+/// A level a low-pass's warm-up watches, in Q16.16.
+fn level_q16(above: f32) -> Result<i32, StageError> {
+    q16(above).ok_or(StageError::Level { above })
+}
+
+/// A cancellation gain in Q16.16: within the range, and zero or at least one step.
 fn gain_q16(gain: f32) -> Result<i32, StageError> {
-    let q = crate::Signal::from_f32(gain).to_bits();
-    if gain.is_finite() && gain.abs() < 32768.0 && (q != 0 || gain == 0.0) && q != i32::MIN {
-        Ok(q)
-    } else {
-        Err(StageError::Gain { gain })
-    }
+    q16(gain)
+        .filter(|&q| (q != 0 || gain == 0.0) && q != i32::MIN)
+        .ok_or(StageError::Gain { gain })
 }
 
 /// One tick of the first-order low-pass y += g (x − y), the gain g in Q31: α, or while the

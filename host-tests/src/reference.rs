@@ -283,12 +283,6 @@ struct StageState {
     seen: u32,
 }
 
-/// A filter's step towards its input, x − y, saturated to the feature range as the
-/// engine's is: only a step from one end of the range to the other is cut.
-fn range_step(d: f64) -> f64 {
-    d.clamp(Signal::MIN.to_f64(), Signal::MAX.to_f64())
-}
-
 /// The most samples a low-pass warms up over.
 const WARM_LIMIT: u32 = 65535;
 
@@ -303,7 +297,7 @@ impl StageState {
         } else {
             0.0
         };
-        self.y += alpha.max(mean_gain) * range_step(x - self.y);
+        self.y += alpha.max(mean_gain) * saturate(x - self.y);
         self.y
     }
 
@@ -640,7 +634,7 @@ impl Model {
                     st.y = if st.seen == 1 || x >= st.y {
                         x
                     } else {
-                        st.y + alpha * range_step(x - st.y)
+                        st.y + alpha * saturate(x - st.y)
                     };
                     st.y
                 }
