@@ -49,10 +49,15 @@ enum Command {
         /// of the nominal Table 1 values.
         #[arg(long)]
         randomize: bool,
-        /// Length of the run in seconds (default: onset + 130 ms for single-event runs, 10 s for
-        /// free motion).
+        /// Length of the run in seconds (default: lead-in + onset + 130 ms for single-event
+        /// runs, 10 s for free motion).
         #[arg(long)]
         duration: Option<f64>,
+        /// How long the motion runs before a single-event run's event window (ms, 0 to
+        /// 10,000): the event comes this much later than its drawn onset, after a detector
+        /// started with the run has learnt its sensors' usual readings.
+        #[arg(long, default_value_t = 0.0)]
+        lead_in_ms: f64,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -244,7 +249,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -257,6 +262,11 @@ enum Command {
         /// Hours of simulated event-free motion for the false-alarm rate.
         #[arg(long, default_value_t = 1.0)]
         free_hours: f64,
+        /// How long each single-event run's motion runs before its event window (ms, 0 to
+        /// 10,000): 0, the default, starts the detector cold 15-40 ms before the event, as
+        /// the paper does; a lead-in shows which misses come from that cold start.
+        #[arg(long, default_value_t = 0.0, conflicts_with = "traces")]
+        lead_in_ms: f64,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -382,8 +392,19 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             randomize,
             duration,
+            lead_in_ms,
             out,
-        } => simulate(&scenario, seed, randomize, duration, out.as_deref()),
+        } => simulate(
+            &scenario,
+            &SimOptions {
+                seed,
+                randomize,
+                duration_s: duration,
+                lead_in_s: lead_in_ms / 1000.0,
+                ..SimOptions::default()
+            },
+            out.as_deref(),
+        ),
         Command::Scenarios => {
             for s in Scenario::all() {
                 println!("{:<26} {}", s.name(), s.expected().unwrap_or("none"));
@@ -511,14 +532,18 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             config,
             free_hours,
+            lead_in_ms,
             json,
             plot_bins,
             ..
         } => evaluate(
-            runs,
-            seed,
+            Plan {
+                runs,
+                seed,
+                free_hours,
+                lead_in_ms,
+            },
             &config,
-            free_hours,
             (json.as_deref(), plot_bins.as_deref()),
         ),
         Command::Features {
@@ -588,23 +613,9 @@ fn node_id(node: u8) -> Result<NodeId> {
     NodeId::new(node).ok_or_else(|| anyhow!("--node {node} must be within 0..=14"))
 }
 
-fn simulate(
-    name: &str,
-    seed: u64,
-    randomize: bool,
-    duration_s: Option<f64>,
-    out: Option<&Path>,
-) -> Result<()> {
+fn simulate(name: &str, opts: &SimOptions, out: Option<&Path>) -> Result<()> {
     let scenario: Scenario = name.parse()?;
-    let trace = sim::simulate(
-        &scenario,
-        &SimOptions {
-            seed,
-            randomize,
-            duration_s,
-            ..SimOptions::default()
-        },
-    )?;
+    let trace = sim::simulate(&scenario, opts)?;
     match out {
         Some(path) => trace.write(path)?,
         None => print!("{}", trace.to_csv()),
@@ -1485,9 +1496,25 @@ const FREE_RUN_S: f64 = 60.0;
 /// of work on two cores, and its bookkeeping stays within tens of megabytes.
 const MAX_RUNS: usize = 100_000;
 
+/// The longest lead-in `evaluate` gives a run (ms), the simulator's limit.
+const MAX_LEAD_IN_MS: f64 = 10_000.0;
+
 /// The most hours of event-free motion `evaluate` simulates: about a day of work on two
 /// cores.
 const MAX_FREE_HOURS: f64 = 100.0;
+
+/// What `evaluate` simulates.
+#[derive(Clone, Copy, Debug)]
+struct Plan {
+    /// Randomized runs per single-event scenario.
+    runs: usize,
+    /// The base seed every run's seed derives from.
+    seed: u64,
+    /// Hours of event-free motion.
+    free_hours: f64,
+    /// How long each single-event run's motion runs before its event window (ms).
+    lead_in_ms: f64,
+}
 
 /// One randomized run of `evaluate`.
 #[derive(Clone, Copy, Debug)]
@@ -1555,13 +1582,14 @@ struct JobResult {
 }
 
 /// Simulates one job and scores it with each detector.
-fn run_job(detectors: &[Detector], job: Job, base_seed: u64) -> Result<JobResult> {
+fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
     let scenario = job.scenario();
-    let seed = job.seed(base_seed);
+    let seed = job.seed(plan.seed);
     let opts = SimOptions {
         seed,
         randomize: true,
         duration_s: job.duration_s(),
+        lead_in_s: plan.lead_in_ms / 1000.0,
         ..SimOptions::default()
     };
     let trace = sim::simulate(&scenario, &opts)?;
@@ -1598,14 +1626,15 @@ fn run_job(detectors: &[Detector], job: Job, base_seed: u64) -> Result<JobResult
     })
 }
 
-/// Runs `runs` of every single-event scenario and `free_runs` stretches of free motion on
-/// all cores behind a progress bar; the results in job order and the wall time taken (s).
+/// Runs the plan's runs of every single-event scenario and `free_runs` stretches of free
+/// motion on all cores behind a progress bar; the results in job order and the wall time
+/// taken (s).
 fn run_jobs(
     detectors: &[Detector],
-    runs: usize,
+    plan: &Plan,
     free_runs: usize,
-    base_seed: u64,
 ) -> Result<(Vec<JobResult>, f64)> {
+    let runs = plan.runs;
     let jobs = Scenario::single_event().len() * runs + free_runs;
     let bar = progress(jobs, "runs")?;
     let started = Instant::now();
@@ -1616,7 +1645,7 @@ fn run_jobs(
         .into_par_iter()
         .with_max_len(1)
         .map(|i| {
-            let result = run_job(detectors, Job::at(i, runs), base_seed);
+            let result = run_job(detectors, Job::at(i, runs), plan);
             bar.inc(1);
             result
         })
@@ -1645,11 +1674,13 @@ struct Tally {
     free_hours: f64,
     /// Every run that went wrong, in job order: scenario, seed, outcome.
     failures: Vec<(Scenario, u64, Outcome)>,
+    /// The single-event runs' lead-in (ms), to reproduce them.
+    lead_in_ms: f64,
 }
 
 impl Tally {
-    /// The tally of detector `d`'s outcomes.
-    fn of(results: &[JobResult], d: usize) -> Tally {
+    /// The tally of detector `d`'s outcomes in runs with a lead-in of `lead_in_ms`.
+    fn of(results: &[JobResult], d: usize, lead_in_ms: f64) -> Tally {
         let scenarios = Scenario::single_event();
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
         let mut bins: Vec<Vec<Option<usize>>> = vec![Vec::new(); scenarios.len()];
@@ -1696,6 +1727,7 @@ impl Tally {
             free_alarms,
             free_hours: free_seconds / 3600.0,
             failures,
+            lead_in_ms,
         }
     }
 
@@ -1745,6 +1777,8 @@ impl Tally {
             }
             let duration = if *scenario == Scenario::FreeMotion {
                 format!(" --duration {FREE_RUN_S}")
+            } else if self.lead_in_ms > 0.0 {
+                format!(" --lead-in-ms {}", self.lead_in_ms)
             } else {
                 String::new()
             };
@@ -1857,19 +1891,23 @@ fn load_detectors(configs: &[PathBuf]) -> Result<(Vec<Detector>, Vec<String>)> {
     Ok(loaded.into_iter().unzip())
 }
 
-/// `evaluate` on simulated runs: `runs` randomized runs of every single-event scenario
-/// from base seed `seed` and `free_hours` of event-free motion, with each detector of
-/// `configs`; the report as JSON and the figure of peak confidences per bin to `outputs`.
+/// `evaluate` on simulated runs: the plan's randomized runs of every single-event
+/// scenario and its hours of event-free motion, with each detector of `configs`; the
+/// report as JSON and the figure of peak confidences per bin to `outputs`.
 fn evaluate(
-    runs: usize,
-    seed: u64,
+    plan: Plan,
     configs: &[PathBuf],
-    free_hours: f64,
     (json, plot_bins): (Option<&Path>, Option<&Path>),
 ) -> Result<()> {
+    let Plan {
+        runs,
+        seed,
+        free_hours,
+        lead_in_ms,
+    } = plan;
     let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
-    let plan = plan_outputs(
+    let outputs = plan_outputs(
         &inputs,
         &[
             json.map(|p| (p, Kind::File)),
@@ -1885,24 +1923,35 @@ fn evaluate(
             fingertip::readable(free_hours)
         );
     }
+    if !(lead_in_ms.is_finite() && (0.0..=MAX_LEAD_IN_MS).contains(&lead_in_ms)) {
+        bail!(
+            "--lead-in-ms = {} must be within 0..={MAX_LEAD_IN_MS} ms",
+            fingertip::readable(lead_in_ms)
+        );
+    }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
-    let (results, wall) = run_jobs(&detectors, runs, free_runs, seed)?;
+    let (results, wall) = run_jobs(&detectors, &plan, free_runs)?;
     let tallies: Vec<(String, Tally)> = names
         .into_iter()
         .enumerate()
-        .map(|(d, name)| (name, Tally::of(&results, d)))
+        .map(|(d, name)| (name, Tally::of(&results, d, lead_in_ms)))
         .collect();
     let simulated_s: f64 = results.iter().map(|r| r.seconds).sum();
     let speed = simulated_s / wall.max(1e-9);
 
+    let lead_in = if lead_in_ms > 0.0 {
+        format!(", each event after a lead-in of {lead_in_ms} ms")
+    } else {
+        String::new()
+    };
     match tallies.as_slice() {
         [(name, tally)] => {
-            println!("{name}: {runs} randomized runs per scenario, base seed {seed}");
+            println!("{name}: {runs} randomized runs per scenario, base seed {seed}{lead_in}");
             tally.print();
         }
         _ => {
             println!(
-                "{runs} randomized runs per scenario, base seed {seed}, the same runs for each detector"
+                "{runs} randomized runs per scenario, base seed {seed}{lead_in}, the same runs for each detector"
             );
             print_comparison(&tallies);
         }
@@ -1916,6 +1965,7 @@ fn evaluate(
         let mut report = serde_json::json!({
             "runs_per_scenario": runs,
             "seed": seed,
+            "lead_in_ms": lead_in_ms,
             "simulated_s_per_wall_s": speed,
         });
         // One detector: its fields at the top level; several: a list of them.
@@ -1930,13 +1980,13 @@ fn evaluate(
                 tallies.iter().map(|(name, t)| t.json(name)).collect();
             report["configs"] = serde_json::Value::from(per_config);
         }
-        plan.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
+        outputs.write(0, serde_json::to_string_pretty(&report)?.as_bytes())?;
     }
     if plot_bins.is_some() {
         let slot = usize::from(json.is_some());
-        plot::write_bins(plan.staging(slot), &bin_panels(&results))?;
+        plot::write_bins(outputs.staging(slot), &bin_panels(&results))?;
     }
-    plan.commit()?;
+    outputs.commit()?;
     Ok(())
 }
 

@@ -616,6 +616,8 @@ fn evaluate_bounds_its_counts() {
         (["--runs", "0"], "--runs"),
         (["--free-hours", "1e300"], "--free-hours = 1e300"),
         (["--free-hours=-1", "--runs=1"], "--free-hours"),
+        (["--lead-in-ms=-1", "--runs=1"], "--lead-in-ms = -1"),
+        (["--lead-in-ms", "1e9"], "--lead-in-ms = 1e9"),
     ] {
         let mut all = vec!["evaluate"];
         all.extend(args);
@@ -628,6 +630,64 @@ fn evaluate_bounds_its_counts() {
         );
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     }
+}
+
+/// `--lead-in-ms` delays every run's event after the same drawn parameters: the report
+/// says so, its JSON carries it, and each failure line reproduces its run with it, the
+/// trace `simulate` writes then recording it. Recordings have their own timing.
+#[test]
+fn evaluate_gives_runs_a_lead_in() {
+    let dir = scratch("lead_in");
+    let json = dir.join("report.json");
+    let out = fingertip(&[
+        "evaluate",
+        "--runs",
+        "3",
+        "--free-hours",
+        "0",
+        "--lead-in-ms",
+        "200",
+        "--config",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/paper.toml"),
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(stdout.contains("after a lead-in of 200 ms"), "{stdout}");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    assert_eq!(report["lead_in_ms"], 200.0);
+    // The paper's detector gets some of these wrong; its first failure's line is run again.
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("  ") && l.contains(" --seed "))
+        .expect("a failure line");
+    let words: Vec<&str> = line.split_whitespace().collect();
+    assert_eq!(words[1], "--seed", "{line}");
+    assert_eq!(words[3..5], ["--lead-in-ms", "200:"], "{line}");
+    let trace = dir.join("run.csv");
+    let sim = fingertip(&[
+        "simulate",
+        words[0],
+        "--randomize",
+        "--seed",
+        words[2],
+        "--lead-in-ms",
+        "200",
+        "--out",
+        trace.to_str().expect("utf-8"),
+    ]);
+    assert!(sim.status.success(), "{}", text(&sim.stderr));
+    let csv = std::fs::read_to_string(&trace).expect("trace");
+    assert!(csv.contains("# lead_in_s: 0.2\n"), "{}", &csv[..400]);
+    let clash = fingertip(&["evaluate", "--traces", ".", "--lead-in-ms", "5"]);
+    assert!(!clash.status.success());
+    assert!(
+        text(&clash.stderr).contains("--lead-in-ms"),
+        "{}",
+        text(&clash.stderr)
+    );
 }
 
 /// `evaluate --traces` on a directory of recordings: every `*.csv` under it (hidden files

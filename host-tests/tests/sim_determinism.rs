@@ -154,3 +154,84 @@ fn every_run_falls_in_a_bin_of_what_matters_most() {
     }
     assert!(Scenario::FreeMotion.binning().is_none());
 }
+
+/// A lead-in delays a run's event by exactly that much with the same drawn parameters, the
+/// motion running all along and the trace recording it; free motion, which has no event,
+/// is the same run with or without one.
+#[test]
+fn a_lead_in_delays_the_event_and_nothing_else() {
+    let lead_in = 0.25;
+    for s in [
+        Scenario::ContactVerySoft1,
+        Scenario::DisturbanceSlow2,
+        Scenario::LinkCollision8,
+        Scenario::SuddenAccelMoving5,
+    ] {
+        let cold = sim::simulate(&s, &opts(5, true)).unwrap();
+        let led = sim::simulate(
+            &s,
+            &SimOptions {
+                lead_in_s: lead_in,
+                ..opts(5, true)
+            },
+        )
+        .unwrap();
+        let num = |t: &fingertip::trace::Trace, key: &str| -> f64 {
+            t.meta(key).unwrap().parse().unwrap()
+        };
+        assert_eq!(
+            cold.meta("param.motion.onset"),
+            led.meta("param.motion.onset"),
+            "{s}"
+        );
+        assert_eq!(cold.meta("lead_in_s"), None, "{s}");
+        assert_eq!(num(&led, "lead_in_s"), lead_in, "{s}");
+        let longer = led.len() as f64 - cold.len() as f64 - lead_in * 5000.0;
+        assert!(
+            longer.abs() <= 1.0,
+            "{s}: {longer} rows more than the lead-in"
+        );
+        // When the event is due (a sudden acceleration's: when its command steps).
+        let scheduled = |t: &fingertip::trace::Trace| {
+            let key = ["scheduled_onset_s", "command_onset_s"]
+                .into_iter()
+                .find(|k| t.meta(k).is_some())
+                .unwrap();
+            num(t, key)
+        };
+        assert!(
+            (scheduled(&led) - scheduled(&cold) - lead_in).abs() < 2e-3,
+            "{s}: scheduled {} then {}",
+            scheduled(&cold),
+            scheduled(&led)
+        );
+        // The physical onset within 2 ms of it: where the arm is then, behind its command by
+        // a following error that its noise moves by some µm, is all that differs.
+        if s.expected().is_some() {
+            let (cold_row, _) = cold.truth_onset().unwrap();
+            let (led_row, _) = led.truth_onset().unwrap();
+            let shift = led_row as f64 - cold_row as f64 - lead_in * 5000.0;
+            assert!(
+                shift.abs() <= 10.0,
+                "{s}: the event moved by {shift} rows more"
+            );
+        }
+        // The finger cruises through the lead-in as it did before its event.
+        assert_eq!(
+            cold.column("vel_des_x").unwrap()[0],
+            led.column("vel_des_x").unwrap()[0]
+        );
+    }
+    let free = |lead_in_s| {
+        sim::simulate(
+            &Scenario::FreeMotion,
+            &SimOptions {
+                duration_s: Some(1.0),
+                lead_in_s,
+                ..opts(3, true)
+            },
+        )
+        .unwrap()
+    };
+    assert_eq!(free(0.0), free(lead_in));
+}

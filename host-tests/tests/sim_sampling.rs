@@ -145,6 +145,18 @@ fn bad_options_are_errors_not_panics() {
             duration_s: Some(1e6),
             ..SimOptions::default()
         },
+        SimOptions {
+            lead_in_s: -0.001,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            lead_in_s: 11.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            lead_in_s: f64::NAN,
+            ..SimOptions::default()
+        },
     ];
     for o in bad {
         let e = sim::simulate(&Scenario::ContactHard8, &o).unwrap_err();

@@ -319,8 +319,8 @@ param_group! {
         /// Angle of the commanded velocity from the pad normal x, towards y.
         approach_angle: "rad" = 0.0, [-0.1745, 0.1745];
         /// When the event (first contact, collision or disturbance) begins (in
-        /// `contact_braking`, when the braking begins). Every single-event run lasts
-        /// onset + 130 ms.
+        /// `contact_braking`, when the braking begins), after the run's lead-in (none
+        /// unless asked for). Every single-event run lasts its lead-in + onset + 130 ms.
         onset: "s" = 0.020, [0.015, 0.040];
     }
 }
