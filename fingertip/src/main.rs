@@ -1775,7 +1775,8 @@ impl Tally {
             if *n > SHOWN_FAILURES {
                 continue;
             }
-            let duration = if *scenario == Scenario::FreeMotion {
+            // What `simulate` needs besides the seed to draw the same run.
+            let options = if *scenario == Scenario::FreeMotion {
                 format!(" --duration {FREE_RUN_S}")
             } else if self.lead_in_ms > 0.0 {
                 format!(" --lead-in-ms {}", self.lead_in_ms)
@@ -1783,7 +1784,7 @@ impl Tally {
                 String::new()
             };
             println!(
-                "  {:<26} --seed {seed}{duration}: {outcome}",
+                "  {:<26} --seed {seed}{options}: {outcome}",
                 scenario.name()
             );
         }
