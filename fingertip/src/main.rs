@@ -1496,9 +1496,6 @@ const FREE_RUN_S: f64 = 60.0;
 /// of work on two cores, and its bookkeeping stays within tens of megabytes.
 const MAX_RUNS: usize = 100_000;
 
-/// The longest lead-in `evaluate` gives a run (ms), the simulator's limit.
-const MAX_LEAD_IN_MS: f64 = 10_000.0;
-
 /// The most hours of event-free motion `evaluate` simulates: about a day of work on two
 /// cores.
 const MAX_FREE_HOURS: f64 = 100.0;
@@ -1924,9 +1921,10 @@ fn evaluate(
             fingertip::readable(free_hours)
         );
     }
-    if !(lead_in_ms.is_finite() && (0.0..=MAX_LEAD_IN_MS).contains(&lead_in_ms)) {
+    let max_lead_in_ms = sim::MAX_LEAD_IN_S * 1000.0;
+    if !(lead_in_ms.is_finite() && (0.0..=max_lead_in_ms).contains(&lead_in_ms)) {
         bail!(
-            "--lead-in-ms = {} must be within 0..={MAX_LEAD_IN_MS} ms",
+            "--lead-in-ms = {} must be within 0..={max_lead_in_ms} ms",
             fingertip::readable(lead_in_ms)
         );
     }

@@ -160,6 +160,9 @@ pub const CHANNELS: [ChannelSpec; 10] = [
     },
 ];
 
+/// The longest lead-in a run takes ([`SimOptions::lead_in_s`], s).
+pub const MAX_LEAD_IN_S: f64 = 10.0;
+
 /// Metadata key of the physical onset time in seconds (absent when nothing happened).
 pub const META_ONSET: &str = "onset_s";
 /// Metadata key of the scenario name.
@@ -761,7 +764,7 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
             "two samples to 3600 s",
         )?;
     }
-    check("lead_in_s", opts.lead_in_s, 0.0, 10.0, "0 to 10 s")?;
+    check("lead_in_s", opts.lead_in_s, 0.0, MAX_LEAD_IN_S, "0 to 10 s")?;
     Ok(())
 }
 
