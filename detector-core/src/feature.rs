@@ -113,6 +113,17 @@ pub enum StageSpec<N> {
         /// Cut-off of the motion's low-pass, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
+    /// The input while another feature stays at or below a level, else 0: evidence that
+    /// means something only in a given state, e.g. a vibration judged against the usual one
+    /// only while the commanded motion, which sets the usual one, holds steady. The output
+    /// is the input exactly (or 0), in the input's unit; the watched feature's unit is its
+    /// own, never traded against the input's.
+    Gate {
+        /// Source channel or feature.
+        input: N,
+        /// The gate shuts (the output is 0) while this feature is above its level.
+        unless: Crossing<N>,
+    },
     /// Rate of change: (x_n − x_{n−1}) · f_s, in the input's unit per second. Zero on the
     /// first tick.
     Rate {
@@ -173,7 +184,8 @@ pub enum StageSpec<N> {
     },
 }
 
-/// A feature rising above a level (see [`StageSpec::LowPass`]'s `warm_up_until`).
+/// A feature rising above a level (see [`StageSpec::LowPass`]'s `warm_up_until` and
+/// [`StageSpec::Gate`]'s `unless`).
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
@@ -279,6 +291,13 @@ impl<N> StageSpec<N> {
                 gain: *gain,
                 cutoff_hz: *cutoff_hz,
             },
+            StageSpec::Gate { input, unless } => StageSpec::Gate {
+                input: f(input)?,
+                unless: Crossing {
+                    feature: f(&unless.feature)?,
+                    above: unless.above,
+                },
+            },
             StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
             StageSpec::Difference { a, b, gain } => StageSpec::Difference {
                 a: f(a)?,
@@ -317,6 +336,7 @@ impl<N> StageSpec<N> {
             StageSpec::Envelope { .. } => "envelope",
             StageSpec::HighPass { .. } => "high_pass",
             StageSpec::Cancel { .. } => "cancel",
+            StageSpec::Gate { .. } => "gate",
             StageSpec::Rate { .. } => "rate",
             StageSpec::Difference { .. } => "difference",
             StageSpec::Dot { .. } => "dot",
@@ -353,7 +373,8 @@ pub enum StageError {
         /// The longest the detector rate allows, in ms.
         max_ms: f32,
     },
-    /// A level a low-pass's warm-up watches is not finite or not below 32768 in magnitude.
+    /// A level a low-pass's warm-up or a gate watches is not finite or not below 32768 in
+    /// magnitude.
     Level {
         /// The requested level.
         above: f32,
@@ -455,6 +476,12 @@ pub enum StageKind {
         motion: u8,
         alpha: u32,
         gain: i32,
+    },
+    /// `input`, or 0 while slot `watch` is above `above` (Q16.16).
+    Gate {
+        input: u8,
+        watch: u8,
+        above: i32,
     },
     /// `rate` is the detector rate in Hz, Q8.
     Rate {
@@ -587,6 +614,7 @@ impl Stage {
             }
             StageKind::Raw(_)
             | StageKind::Abs(_)
+            | StageKind::Gate { .. }
             | StageKind::Rate { .. }
             | StageKind::Difference { .. }
             | StageKind::Dot(_)
@@ -647,6 +675,14 @@ impl Stage {
                 motion,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
                 gain: gain_q16(gain)?,
+            },
+            StageSpec::Gate {
+                input,
+                unless: Crossing { feature, above },
+            } => StageKind::Gate {
+                input,
+                watch: feature,
+                above: level_q16(above)?,
             },
             StageSpec::Rate { input } => StageKind::Rate {
                 input,
@@ -748,6 +784,17 @@ impl Stage {
                 let y = low_pass(st, get(motion), alpha, WARM_LIMIT);
                 // It saturates once, at the end.
                 sat32(i64::from(get(input)) - scale_q16(y, gain))
+            }
+            StageKind::Gate {
+                input,
+                watch,
+                above,
+            } => {
+                if get(watch) > above {
+                    0
+                } else {
+                    get(input)
+                }
             }
             StageKind::Rate { input, rate } => {
                 let x = get(input);
@@ -951,6 +998,16 @@ impl Stage {
                 w.u32(alpha);
                 w.u32(gain as u32);
             }
+            StageKind::Gate {
+                input,
+                watch,
+                above,
+            } => {
+                w.u8(StageTag::Gate as u8);
+                w.u8(input);
+                w.u8(watch);
+                w.u32(above as u32);
+            }
             StageKind::Rate { input, rate } => {
                 w.u8(StageTag::Rate as u8);
                 w.u8(input);
@@ -1026,6 +1083,11 @@ impl Stage {
                 alpha: r.u32()?,
                 gain: r.u32()? as i32,
             },
+            Some(StageTag::Gate) => StageKind::Gate {
+                input: r.u8()?,
+                watch: r.u8()?,
+                above: r.u32()? as i32,
+            },
             Some(StageTag::Rate) => StageKind::Rate {
                 input: r.u8()?,
                 rate: r.u32()?,
@@ -1084,6 +1146,9 @@ impl StageKind {
             | StageKind::Ste { input: i, .. } => (i as usize) < slots,
             StageKind::Difference { a, b, .. }
             | StageKind::Magnitude(a, b)
+            | StageKind::Gate {
+                input: a, watch: b, ..
+            }
             | StageKind::LowPass {
                 input: a, until: b, ..
             }
@@ -1163,10 +1228,11 @@ enum StageTag {
     Cancel = 9,
     Mean = 10,
     Envelope = 11,
+    Gate = 12,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 12] = [
+    const ALL: [StageTag; 13] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1179,6 +1245,7 @@ impl StageTag {
         StageTag::Cancel,
         StageTag::Mean,
         StageTag::Envelope,
+        StageTag::Gate,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1219,6 +1286,14 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
             } => write!(
                 f,
                 "Cancel {{ input: {input}, motion: {motion}, alpha: {alpha}, gain: {gain} }}"
+            ),
+            StageKind::Gate {
+                input,
+                watch,
+                above,
+            } => write!(
+                f,
+                "Gate {{ input: {input}, watch: {watch}, above: {above} }}"
             ),
             StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
             StageKind::Difference { a, b, gain } => {

@@ -205,6 +205,11 @@ enum Stage {
         alpha: f64,
         gain: f64,
     },
+    /// The input, or 0 while the watched slot is above the level.
+    Gate {
+        input: usize,
+        unless: (usize, f64),
+    },
     Rate {
         input: usize,
         rate: f64,
@@ -461,6 +466,11 @@ impl Model {
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
                     gain: f64::from(gain),
                 },
+                StageSpec::Gate { input, unless } => Stage::Gate {
+                    input,
+                    // The level as the core holds it (16.16).
+                    unless: (unless.feature, Signal::from_f32(unless.above).to_f64()),
+                },
                 StageSpec::Rate { input } => Stage::Rate { input, rate },
                 StageSpec::Difference { a, b, gain } => Stage::Difference {
                     a,
@@ -644,6 +654,16 @@ impl Model {
                     alpha,
                     gain,
                 } => v(*input) - gain * st.low_pass(v(*motion), *alpha, WARM_LIMIT),
+                Stage::Gate {
+                    input,
+                    unless: (watch, above),
+                } => {
+                    if v(*watch) > *above {
+                        0.0
+                    } else {
+                        v(*input)
+                    }
+                }
                 Stage::Rate { input, rate } => {
                     let x = v(*input);
                     let r = st.previous.map_or(0.0, |p| (x - p) * rate);

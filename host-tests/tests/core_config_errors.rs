@@ -264,7 +264,8 @@ fn an_unknown_channel() {
         &["feature 'fa'", "'fb'"],
     );
     assert_eq!(e.problem, Problem::UnknownInput(name("fb")));
-    // So may the feature a low-pass's warm-up watches.
+    // So may the feature a low-pass's warm-up or a gate watches, and its level must be
+    // finite and within the 16.16 range; a channel's crossing is accepted.
     let until = |feature: &str, above: f32| StageSpec::LowPass {
         input: name("a"),
         cutoff_hz: 1.0,
@@ -274,27 +275,35 @@ fn an_unknown_channel() {
             above,
         }),
     };
-    let e = reject(
-        |c| c.features[0].stage = until("fb", 1.0),
-        &["feature 'fa'", "'fb'"],
-    );
-    assert_eq!(e.problem, Problem::UnknownInput(name("fb")));
-    // Its level must be finite and within the 16.16 range.
-    for above in [f32::NAN, 40000.0] {
+    let gate = |feature: &str, above: f32| StageSpec::Gate {
+        input: name("a"),
+        unless: Crossing {
+            feature: name(feature),
+            above,
+        },
+    };
+    let watchers: [fn(&str, f32) -> StageSpec<String>; 2] = [until, gate];
+    for watcher in watchers {
         let e = reject(
-            |c| c.features[0].stage = until("b", above),
-            &["feature 'fa'", "above = "],
+            |c| c.features[0].stage = watcher("fb", 1.0),
+            &["feature 'fa'", "'fb'"],
         );
-        assert_eq!(e.item, Item::Feature(name("fa")));
-        assert!(
-            matches!(e.problem, Problem::Stage(StageError::Level { .. })),
-            "{e:?}"
-        );
+        assert_eq!(e.problem, Problem::UnknownInput(name("fb")));
+        for above in [f32::NAN, f32::INFINITY, 40000.0, -40000.0] {
+            let e = reject(
+                |c| c.features[0].stage = watcher("b", above),
+                &["feature 'fa'", "above = "],
+            );
+            assert_eq!(e.item, Item::Feature(name("fa")));
+            assert!(
+                matches!(e.problem, Problem::Stage(StageError::Level { .. })),
+                "{e:?}"
+            );
+        }
+        let mut config = good();
+        config.features[0].stage = watcher("b", -1.0);
+        assert!(detector_build::build(&config).is_ok());
     }
-    // A channel's crossing is accepted.
-    let mut config = good();
-    config.features[0].stage = until("b", 1.0);
-    assert!(detector_build::build(&config).is_ok());
 }
 
 #[test]

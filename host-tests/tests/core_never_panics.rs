@@ -125,6 +125,10 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::Envelope { input, cutoff_hz }),
+        (n(), n(), any_f32()).prop_map(|(input, feature, above)| StageSpec::Gate {
+            input,
+            unless: Crossing { feature, above },
+        }),
         (
             n(),
             n(),
@@ -466,7 +470,7 @@ proptest! {
     /// build far more often, so `tick` sees many shapes of detector.
     #[test]
     fn plausible_configs_tick_without_panicking(
-        kinds in prop::collection::vec((0u8..12, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
+        kinds in prop::collection::vec((0u8..13, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
         cdfs in prop::collection::vec((plausible_cdf(), any::<u8>(), 0.0f32..=0.25), 1..=8),
         masks in prop::collection::vec(any::<u8>(), 1..=3),
         ticks in prop::collection::vec(any_tick(), 1..=TICKS),
@@ -496,6 +500,7 @@ proptest! {
                 8 => StageSpec::Cancel { input: p(0), motion: p(1), gain: *cutoff - 200.0, cutoff_hz: *cutoff },
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
+                11 => StageSpec::Gate { input: p(0), unless: Crossing { feature: p(1), above: *cutoff - 200.0 } },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };
             let n = format!("f{k}");

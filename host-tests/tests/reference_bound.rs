@@ -19,7 +19,8 @@
 //!   over), the envelope `2⁻¹⁶ + 2⁻²⁰ max|x|`, the mean `2⁻¹⁶ + N 2⁻²⁴ max|x|`, the dot product `2⁻¹⁶ + |a|δ_b + |b|δ_a`,
 //!   the magnitude `2⁻¹⁶ + 2⁻¹⁵ max|m| + δ_x + δ_y`, the STE
 //!   `2⁻¹⁵ + N 2⁻²³ max x² + N 2⁻²⁵ max ζ + 2 max|x| δ_x + δ_x²`, the rate
-//!   `2⁻⁸ max|Δx| + 2⁻¹⁶` (its input must be exact).
+//!   `2⁻⁸ max|Δx| + 2⁻¹⁶` (its input must be exact), the gate its input's (it watches
+//!   an exact slot, so both models shut it on the same ticks).
 //!
 //! The generator makes every ramp at least `2¹⁴ δ_f` wide, so `(2/span) δ_f ≤ 2⁻¹³` and
 //! `ε_t < 6.5 · 2⁻¹⁵ < 2⁻¹²`. Eq. 14 then moves by at most `ε_t` per context term (each
@@ -128,7 +129,8 @@ impl ChannelPlan {
 }
 
 /// A feature: its kind (0 raw, 1 abs, 2 low-pass, 3 rate, 4 difference, 5 dot,
-/// 6 magnitude, 7 rectangular STE, 8 triangular STE), input picks and a parameter.
+/// 6 magnitude, 7 rectangular STE, 8 triangular STE, 9 mean, 10 envelope, 11 gate), input
+/// picks and a parameter.
 #[derive(Clone, Debug)]
 struct FeaturePlan {
     kind: u8,
@@ -205,7 +207,7 @@ fn plan() -> impl Strategy<Value = Plan> {
         prop::collection::vec(any::<i32>(), TICKS),
     )
         .prop_map(|(k, mode, words)| ChannelPlan { k, mode, words });
-    let feature = (0u8..11, any::<[u8; 4]>(), any::<u16>())
+    let feature = (0u8..12, any::<[u8; 4]>(), any::<u16>())
         .prop_map(|(kind, picks, param)| FeaturePlan { kind, picks, param });
     (
         rate,
@@ -313,6 +315,21 @@ fn stage_for(
                     bound: bound_cap(ia.bound + f64::from(gain).abs() * info[b].bound),
                     exact: gain == 1.0 && ia.exact && info[b].exact,
                 },
+            )
+        }
+        11 => {
+            // The watched slot exact (the same value in both models, so both shut the gate
+            // on the same ticks), channel 0 otherwise; a level within its usual range.
+            let w = if info[pick(1)].exact { pick(1) } else { 0 };
+            (
+                StageSpec::Gate {
+                    input: n(a),
+                    unless: Crossing {
+                        feature: n(w),
+                        above: f32::from(p.picks[2]) - 128.0,
+                    },
+                },
+                ia,
             )
         }
         10 => {

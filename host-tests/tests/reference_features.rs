@@ -5,6 +5,7 @@
 //! | stage | inputs | bound |
 //! |---|---|---|
 //! | raw, abs, difference | any | exact (saturating at the `Signal` range) |
+//! | gate | any | exact (the input or 0) |
 //! | difference, gain g ≠ 1 | any, |g| < 4 | `1 LSB + 2⁻¹⁷ |b|` (saturating) |
 //! | rate | any, integer rate | exact (saturating) |
 //! | rate | any, any rate | `2⁻⁸ |Δx| + 1 LSB` (the rate is held to 1/256 Hz) |
@@ -34,7 +35,7 @@
 mod support;
 
 use detector_build::Config;
-use detector_core::{Signal, StageSpec, Window};
+use detector_core::{Crossing, Signal, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -110,6 +111,13 @@ fn stage(kind: &str) -> StageSpec<String> {
         "magnitude" => StageSpec::Magnitude {
             of: [name("x"), name("y")],
         },
+        "gate" => StageSpec::Gate {
+            input: name("x"),
+            unless: Crossing {
+                feature: name("y"),
+                above: 0.0,
+            },
+        },
         _ => raw("x"),
     }
 }
@@ -117,14 +125,14 @@ fn stage(kind: &str) -> StageSpec<String> {
 proptest! {
     #![proptest_config(proptest_config(CASES, "proptest-regressions/reference_features.txt"))]
 
-    /// Raw, abs, difference, and rate at an integer detector rate are exact, saturating
-    /// at the `Signal` range, including the extremes of the input range.
+    /// Raw, abs, difference, gate, and rate at an integer detector rate are exact,
+    /// saturating at the `Signal` range, including the extremes of the input range.
     #[test]
     fn exact_stages_are_exact(
         rate in 10u32..=50_000,
         s in prop_oneof![samples(4, 31, 80), Just(vec![[i32::MIN, i32::MAX, 0, -1], [i32::MAX, i32::MIN, 1, 0], [i32::MIN; 4]])],
     ) {
-        let kinds = ["raw", "abs", "difference", "rate"];
+        let kinds = ["raw", "abs", "difference", "rate", "gate"];
         let c = features_config(rate as f32, kinds.iter().map(|k| (*k, stage(k))).collect());
         for (t, (got, want)) in run(&c, &s).iter().enumerate() {
             for (i, kind) in kinds.iter().enumerate() {
@@ -442,6 +450,35 @@ fn envelope_by_hand() {
     let s = [10, 0, 0, 20, 0].map(|v| [v << 16, 0, 0, 0]);
     let want = [10.0, 5.0, 2.5, 20.0, 10.0];
     first_feature_follows(&c, &s, &want);
+}
+
+/// The gate by hand: x passes while y is at or below 0.5, and reads 0 while y is above it
+/// (x 3, 4, 5, 6, 7 with y 0, 0.5, 0.75, -2, 1 give 3, 4, 0, 6, 0).
+#[test]
+fn gate_by_hand() {
+    let c = features_config(
+        1000.0,
+        vec![(
+            "gate",
+            StageSpec::Gate {
+                input: name("x"),
+                unless: Crossing {
+                    feature: name("y"),
+                    above: 0.5,
+                },
+            },
+        )],
+    );
+    let s = [
+        (3, 0),
+        (4, 1 << 15),
+        (5, 3 << 14),
+        (6, -2 << 16),
+        (7, 1 << 16),
+    ]
+    .map(|(x, y)| [x << 16, y, 0, 0]);
+    let got: Vec<f64> = run(&c, &s).into_iter().map(|(g, _)| g[0]).collect();
+    assert_eq!(got, [3.0, 4.0, 0.0, 6.0, 0.0]);
 }
 
 /// The low-pass warms up as the mean of what it has seen: at f_c = 1 Hz and f_s = 1 kHz

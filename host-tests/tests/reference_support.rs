@@ -306,6 +306,8 @@ pub fn model_series(config: &Config, samples: &[Vec<f64>]) -> Vec<Vec<f64>> {
 ///   running mean carries n/2 times);
 /// - high-pass: twice the input's + the low-pass's own;
 /// - envelope: the input's + `LSB + 2⁻²⁰ max|x|` (up exactly, down as a warm low-pass);
+/// - gate: the input's, and `max|x|` more when the watched slot is not exact (the model and
+///   the engine may then see it on either side of the level);
 /// - mean: the input's + `LSB + N 2⁻²⁴ max|x|` (2²⁴/n rounded);
 /// - cancel: the input's + `2 LSB + |g| (δ_m + the low-pass's own) + 2⁻¹⁷ max|m|` (the
 ///   motion's low-pass times the gain, the gain rounded to 2⁻¹⁶);
@@ -340,6 +342,14 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
                 2.0 * d(input) + low_pass(*cutoff_hz, m(input))
             }
             StageSpec::Envelope { input, .. } => d(input) + LSB + m(input) / 1_048_576.0,
+            StageSpec::Gate { input, unless } => {
+                let undecided = if d(&unless.feature) > 0.0 {
+                    m(input)
+                } else {
+                    0.0
+                };
+                d(input) + undecided
+            }
             StageSpec::Cancel {
                 input,
                 motion,
