@@ -449,9 +449,10 @@ pub struct Stage(StageKind);
 pub enum StageKind {
     Raw(u8),
     Abs(u8),
-    /// `alpha` is α in Q31; `warm` the most samples the warm-up's mean counts
-    /// ([`WARM_LIMIT`] when the mean alone ends it); the warm-up also ends once slot `until`
-    /// is above `until_above` (Q16.16; `i32::MAX`: never, `until` then the input).
+    /// `alpha` is α in Q31; `warm` the last sample the warm-up's mean counts: the
+    /// configured limit or, sooner, where 1/n falls to α ([`mean_gain_samples`]); the
+    /// warm-up also ends once slot `until` is above `until_above` (Q16.16; `i32::MAX`:
+    /// never, `until` then the input).
     LowPass {
         input: u8,
         alpha: u32,
@@ -464,18 +465,21 @@ pub enum StageKind {
         input: u8,
         alpha: u32,
     },
-    /// The input minus its low-pass, `alpha` as for [`StageKind::LowPass`].
+    /// The input minus its low-pass, `alpha` and `warm` as for [`StageKind::LowPass`]
+    /// (`warm` derived from `alpha`, not carried in an image).
     HighPass {
         input: u8,
         alpha: u32,
+        warm: u16,
     },
-    /// `input − gain · low-pass(motion)`, `alpha` as for [`StageKind::LowPass`], `gain` in
-    /// Q16.16 (never `i32::MIN`).
+    /// `input − gain · low-pass(motion)`, `alpha` and `warm` as for
+    /// [`StageKind::HighPass`], `gain` in Q16.16 (never `i32::MIN`).
     Cancel {
         input: u8,
         motion: u8,
         alpha: u32,
         gain: i32,
+        warm: u16,
     },
     /// `input`, or 0 while slot `watch` is above `above` (Q16.16).
     Gate {
@@ -649,10 +653,11 @@ impl Stage {
                     Some(Crossing { feature, above }) => (feature, level_q16(above)?),
                     None => (input, i32::MAX),
                 };
+                let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
                 StageKind::LowPass {
                     input,
-                    alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
-                    warm: warm_up_samples(rate_hz, warm_up_ms)?,
+                    alpha,
+                    warm: warm_up_samples(rate_hz, warm_up_ms)?.min(mean_gain_samples(alpha)),
                     until,
                     until_above,
                 }
@@ -661,21 +666,29 @@ impl Stage {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
             },
-            StageSpec::HighPass { input, cutoff_hz } => StageKind::HighPass {
-                input,
-                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
-            },
+            StageSpec::HighPass { input, cutoff_hz } => {
+                let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
+                StageKind::HighPass {
+                    input,
+                    alpha,
+                    warm: mean_gain_samples(alpha),
+                }
+            }
             StageSpec::Cancel {
                 input,
                 motion,
                 gain,
                 cutoff_hz,
-            } => StageKind::Cancel {
-                input,
-                motion,
-                alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
-                gain: gain_q16(gain)?,
-            },
+            } => {
+                let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
+                StageKind::Cancel {
+                    input,
+                    motion,
+                    alpha,
+                    gain: gain_q16(gain)?,
+                    warm: mean_gain_samples(alpha),
+                }
+            }
             StageSpec::Gate {
                 input,
                 unless: Crossing { feature, above },
@@ -771,17 +784,18 @@ impl Stage {
                 }
                 (st.acc >> 31) as i32
             }
-            StageKind::HighPass { input, alpha } => {
+            StageKind::HighPass { input, alpha, warm } => {
                 let x = get(input);
-                x.saturating_sub(low_pass(st, x, alpha, WARM_LIMIT))
+                x.saturating_sub(low_pass(st, x, alpha, warm))
             }
             StageKind::Cancel {
                 input,
                 motion,
                 alpha,
                 gain,
+                warm,
             } => {
-                let y = low_pass(st, get(motion), alpha, WARM_LIMIT);
+                let y = low_pass(st, get(motion), alpha, warm);
                 // It saturates once, at the end.
                 sat32(i64::from(get(input)) - scale_q16(y, gain))
             }
@@ -976,7 +990,7 @@ impl Stage {
                 w.u8(until);
                 w.u32(until_above as u32);
             }
-            StageKind::HighPass { input, alpha } => {
+            StageKind::HighPass { input, alpha, .. } => {
                 w.u8(StageTag::HighPass as u8);
                 w.u8(input);
                 w.u32(alpha);
@@ -991,6 +1005,7 @@ impl Stage {
                 motion,
                 alpha,
                 gain,
+                ..
             } => {
                 w.u8(StageTag::Cancel as u8);
                 w.u8(input);
@@ -1062,27 +1077,38 @@ impl Stage {
         let kind = match StageTag::from_byte(r.u8()?) {
             Some(StageTag::Raw) => StageKind::Raw(r.u8()?),
             Some(StageTag::Abs) => StageKind::Abs(r.u8()?),
-            Some(StageTag::LowPass) => StageKind::LowPass {
-                input: r.u8()?,
-                alpha: r.u32()?,
-                warm: r.u16()?,
-                until: r.u8()?,
-                until_above: r.u32()? as i32,
-            },
-            Some(StageTag::HighPass) => StageKind::HighPass {
-                input: r.u8()?,
-                alpha: r.u32()?,
-            },
+            Some(StageTag::LowPass) => {
+                let (input, alpha) = (r.u8()?, r.u32()?);
+                StageKind::LowPass {
+                    input,
+                    alpha,
+                    warm: r.u16()?.min(mean_gain_samples(alpha)),
+                    until: r.u8()?,
+                    until_above: r.u32()? as i32,
+                }
+            }
+            Some(StageTag::HighPass) => {
+                let (input, alpha) = (r.u8()?, r.u32()?);
+                StageKind::HighPass {
+                    input,
+                    alpha,
+                    warm: mean_gain_samples(alpha),
+                }
+            }
             Some(StageTag::Envelope) => StageKind::Envelope {
                 input: r.u8()?,
                 alpha: r.u32()?,
             },
-            Some(StageTag::Cancel) => StageKind::Cancel {
-                input: r.u8()?,
-                motion: r.u8()?,
-                alpha: r.u32()?,
-                gain: r.u32()? as i32,
-            },
+            Some(StageTag::Cancel) => {
+                let (input, motion, alpha) = (r.u8()?, r.u8()?, r.u32()?);
+                StageKind::Cancel {
+                    input,
+                    motion,
+                    alpha,
+                    gain: r.u32()? as i32,
+                    warm: mean_gain_samples(alpha),
+                }
+            }
             Some(StageTag::Gate) => StageKind::Gate {
                 input: r.u8()?,
                 watch: r.u8()?,
@@ -1272,8 +1298,11 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                     "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm}, until: {until}, until_above: {until_above} }}"
                 )
             }
-            StageKind::HighPass { input, alpha } => {
-                write!(f, "HighPass {{ input: {input}, alpha: {alpha} }}")
+            StageKind::HighPass { input, alpha, warm } => {
+                write!(
+                    f,
+                    "HighPass {{ input: {input}, alpha: {alpha}, warm: {warm} }}"
+                )
             }
             StageKind::Envelope { input, alpha } => {
                 write!(f, "Envelope {{ input: {input}, alpha: {alpha} }}")
@@ -1283,9 +1312,10 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                 motion,
                 alpha,
                 gain,
+                warm,
             } => write!(
                 f,
-                "Cancel {{ input: {input}, motion: {motion}, alpha: {alpha}, gain: {gain} }}"
+                "Cancel {{ input: {input}, motion: {motion}, alpha: {alpha}, gain: {gain}, warm: {warm} }}"
             ),
             StageKind::Gate {
                 input,
@@ -1406,7 +1436,7 @@ fn gain_q16(gain: f32) -> Result<i32, StageError> {
 /// One tick of the first-order low-pass y += g (x − y), the gain g in Q31: α, or while the
 /// filter warms up 1/n for its n-th sample, whichever is larger (the first sample sets y;
 /// until 1/n falls below α, y is the mean of the samples so far, to within the rounding of
-/// 1/n). The warm-up counts at most `warm` samples (at most [`WARM_LIMIT`]).
+/// 1/n). `warm` is the last sample the warm-up counts, at most [`mean_gain_samples`]`(α)`.
 #[inline(always)]
 fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
     if !st.primed {
@@ -1418,16 +1448,23 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
         if st.pos < warm {
             st.pos += 1;
             // n ≥ 2, so 2^31 / n ≤ 2^30 (one 32-bit division, in hardware on the chip).
-            let mean_gain = (1u32 << 31) / u32::from(st.pos);
-            if mean_gain > alpha {
-                gain = mean_gain;
-            } else {
-                st.pos = WARM_LIMIT;
-            }
+            gain = (1u32 << 31) / u32::from(st.pos);
         }
         filter_step(st, x, gain);
     }
     (st.acc >> 31) as i32
+}
+
+/// The last sample n whose plain-mean gain ⌊2³¹ / n⌋ is above α, where a low-pass's warm-up
+/// ends unless its own limit ends it sooner: ⌊2³¹ / n⌋ > α ⇔ n ≤ 2³¹ / (α + 1). At most
+/// [`WARM_LIMIT`].
+const fn mean_gain_samples(alpha: u32) -> u16 {
+    let n = (1u32 << 31) / alpha.saturating_add(1);
+    if n > WARM_LIMIT as u32 {
+        WARM_LIMIT
+    } else {
+        n as u16
+    }
 }
 
 /// Moves a filter's state towards `x` by the Q31 `gain` (0 < g < 1): acc += g (x − y), the
@@ -1654,6 +1691,39 @@ mod tests {
         let next = 0.75 + alpha * 0.25;
         assert!((y[4] - next).abs() < 1e-4, "{} vs {next}", y[4]);
         assert!((y[300] - 1.0).abs() < 2.0 / 65536.0);
+    }
+
+    /// The warm-up's end, worked out once from α, is the last sample whose plain-mean gain
+    /// ⌊2³¹/n⌋ is still above α, for coefficients from the smallest to the largest.
+    #[test]
+    fn the_warm_up_ends_where_the_mean_gain_falls_to_alpha() {
+        let gain = |n: u32| (1u32 << 31) / n;
+        for alpha in [
+            1u32,
+            32_767,
+            32_768,
+            65_536,
+            3_000_000,
+            13_400_000,
+            (1 << 30) - 1,
+            1 << 30,
+            (1 << 31) - 1,
+        ] {
+            let end = u32::from(mean_gain_samples(alpha));
+            if end < u32::from(WARM_LIMIT) {
+                assert!(
+                    gain(end) > alpha && gain(end + 1) <= alpha,
+                    "α {alpha}: {end}"
+                );
+            } else {
+                assert!(gain(end) > alpha, "α {alpha}: {end}");
+            }
+        }
+        assert_eq!(
+            mean_gain_samples(u32::MAX),
+            0,
+            "a corrupt α ends it at once"
+        );
     }
 
     /// A warm-up limited to `warm_up_ms` is the plain mean of that many samples, then the
