@@ -501,6 +501,107 @@ impl DriveRipple {
         let ripple = self.amplitude * self.phasor.sin;
         [ripple * self.direction[0], ripple * self.direction[1]]
     }
+
+    /// The bodies' steady response to the ripple as [`DriveRipple::force`] will go on from
+    /// here: displacements and velocities of arm, distal body and skin (x, y), about
+    /// their steady motion. The chain is linearized: the joint loops as a continuous PD
+    /// (their sampling and the encoders' quantization left out), the drive's friction by
+    /// its viscous part.
+    fn steady_response(
+        &self,
+        chain: &Chain,
+        controller: &Controller,
+    ) -> ([[f64; 2]; 3], [[f64; 2]; 3]) {
+        let zero = ([[0.0; 2]; 3], [[0.0; 2]; 3]);
+        let (ds, dc) = self.phasor.step;
+        let w = ds.atan2(dc) / self.dt;
+        if self.amplitude == 0.0 || w == 0.0 {
+            return zero;
+        }
+        // Complex amplitudes X of x(t) = Im(X e^{iwt}), the force A e^{iwt} along the
+        // ripple's direction; rows and columns are arm x, y, distal x, y, skin x, y, as
+        // real and imaginary parts: (Kr + i Ki) X = F.
+        let mut kr = [[0.0; 6]; 6];
+        let mut ki = [[0.0; 6]; 6];
+        let (kl, cl) = chain.link;
+        for r in 0..2 {
+            for c in 0..2 {
+                let shape = controller.shape[r][c];
+                kr[r][c] += shape * (controller.kp - chain.arm_mass * w * w);
+                ki[r][c] += shape * controller.kd * w;
+            }
+            ki[r][r] += chain.viscous * w;
+            let (a, d, s) = (r, 2 + r, 4 + r);
+            let (kf, cf) = (chain.foam_k[r], chain.foam_c[r]);
+            // Link 1 to link 2, link 2 to skin: a spring and damper each.
+            for (i, j, k, c) in [(a, d, kl, cl), (d, s, kf, cf)] {
+                kr[i][i] += k;
+                kr[j][j] += k;
+                kr[i][j] -= k;
+                kr[j][i] -= k;
+                ki[i][i] += c * w;
+                ki[j][j] += c * w;
+                ki[i][j] -= c * w;
+                ki[j][i] -= c * w;
+            }
+            kr[d][d] -= chain.distal_mass * w * w;
+            kr[s][s] -= chain.skin_mass * w * w;
+        }
+        let mut m = [[0.0; 13]; 12];
+        for r in 0..6 {
+            for c in 0..6 {
+                m[r][c] = kr[r][c];
+                m[r][6 + c] = -ki[r][c];
+                m[6 + r][c] = ki[r][c];
+                m[6 + r][6 + c] = kr[r][c];
+            }
+        }
+        for (row, d) in m.iter_mut().zip(self.direction) {
+            row[12] = self.amplitude * d;
+        }
+        let Some(x) = solve(m) else {
+            return zero;
+        };
+        // The next step's force is A sin(w dt), so time zero is at phase w dt.
+        let (sn, cs) = (w * self.dt).sin_cos();
+        let mut out = zero;
+        for body in 0..3 {
+            for k in 0..2 {
+                let (re, im) = (x[2 * body + k], x[6 + 2 * body + k]);
+                // X e^{i phase}: its imaginary part is the displacement, w times its real
+                // part the velocity.
+                out.0[body][k] = re * sn + im * cs;
+                out.1[body][k] = w * (re * cs - im * sn);
+            }
+        }
+        out
+    }
+}
+
+/// Solves the linear system whose augmented rows are `m` (12 unknowns, the right-hand side
+/// last) by Gaussian elimination with partial pivoting; `None` when it is singular.
+fn solve(mut m: [[f64; 13]; 12]) -> Option<[f64; 12]> {
+    for col in 0..12 {
+        let pivot = (col..12).max_by(|&a, &b| m[a][col].abs().total_cmp(&m[b][col].abs()))?;
+        if m[pivot][col] == 0.0 || !m[pivot][col].is_finite() {
+            return None;
+        }
+        m.swap(col, pivot);
+        let (done, rest) = m.split_at_mut(col + 1);
+        let top = &done[col];
+        for row in rest {
+            let f = row[col] / top[col];
+            for (v, t) in row[col..].iter_mut().zip(&top[col..]) {
+                *v -= f * t;
+            }
+        }
+    }
+    let mut x = [0.0; 12];
+    for row in (0..12).rev() {
+        let tail: f64 = (row + 1..12).map(|c| m[row][c] * x[c]).sum();
+        x[row] = (m[row][12] - tail) / m[row][row];
+    }
+    Some(x)
 }
 
 /// The tip position the controller measures: the arm's, quantized by the encoders.
@@ -1127,13 +1228,25 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         std::array::from_fn(|k| chain.friction(c0.v[k]) - controller.compensated(c0.v[k]));
     let lag = mul(&chain.linkage.shape_inv, left).map(|f| f / controller.kp);
     let start: [f64; 2] = std::array::from_fn(|k| -lag[k]);
+    let mut ripple = DriveRipple {
+        amplitude: p.drive_ripple,
+        pitch: p.ripple_pitch,
+        dt,
+        phasor: Phasor::new(0.0, 0.0),
+        direction: [0.0; 2],
+    };
+    // The drive's ripple has rung the structure since long before: each body starts on its
+    // steady response to it, not at rest, where a lightly damped mode would take hundreds
+    // of ms to build up.
+    ripple.follow(c0.v);
+    let (x, v) = ripple.steady_response(&chain, &controller);
     let mut b = Bodies {
-        xa: start,
-        va: c0.v,
-        xd: start,
-        vd: c0.v,
-        xs: start,
-        vs: c0.v,
+        xa: std::array::from_fn(|k| start[k] + x[0][k]),
+        va: std::array::from_fn(|k| c0.v[k] + v[0][k]),
+        xd: std::array::from_fn(|k| start[k] + x[1][k]),
+        vd: std::array::from_fn(|k| c0.v[k] + v[1][k]),
+        xs: std::array::from_fn(|k| start[k] + x[2][k]),
+        vs: std::array::from_fn(|k| c0.v[k] + v[2][k]),
     };
     // The motion was steady before time zero: the fingertip holds the message of then.
     context.received = context
@@ -1145,13 +1258,6 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         position: o.position + dot(o.normal, start),
     });
     let mut disturbance = setup.disturbance.as_ref().map(|d| Disturbance::new(d, dt));
-    let mut ripple = DriveRipple {
-        amplitude: p.drive_ripple,
-        pitch: p.ripple_pitch,
-        dt,
-        phasor: Phasor::new(0.0, 0.0),
-        direction: [0.0; 2],
-    };
     let (inv_ma, inv_md, ms) = (chain.arm_inv_mass, 1.0 / chain.distal_mass, chain.skin_mass);
     let inv_ms = 1.0 / ms;
     let carrier = p.carrier_mass;
@@ -1599,6 +1705,50 @@ mod tests {
         assert_eq!(ticks.len(), 1500);
         assert!(ticks.windows(2).all(|w| (13..=14).contains(&(w[1] - w[0]))));
         assert_eq!(ticks[3], 40, "tick 3 at 2 ms");
+    }
+
+    /// A finger cruising since long before time zero: the drive's ripple, tuned onto the
+    /// bending mode (120 Hz, 1 % of damping), shakes the force sensor as hard in its first
+    /// 5 ms as it does half a second later. Started from rest, the structure would read a
+    /// third of that for the first 5 ms and build up over tens of ms.
+    #[test]
+    fn ripple_rings_the_structure_from_the_first_sample() {
+        let mut plant = Plant::nominal();
+        plant.link_damping_ratio = 0.01;
+        plant.drive_ripple = 0.08;
+        let speed = 0.06;
+        plant.ripple_pitch = speed / plant.link_frequency;
+        let mut sensors = Sensors::nominal();
+        sensors.noise_scale = 0.0;
+        let rate_hz = 5000.0;
+        let (_, required) = required_rate(&plant, None, None);
+        let mut setup = Setup {
+            plant,
+            sensors,
+            trajectory: Trajectory::new(0.001, [speed, 0.0]),
+            object: None,
+            obstacle: None,
+            disturbance: None,
+            rows: 4001,
+            rate_hz,
+            oversampling: (required / rate_hz).ceil().max(2.0) as usize,
+            context_rate_hz: 1000.0,
+        };
+        let mut noise = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
+        let out = run(&mut setup, &mut noise);
+        let force = &out.channels[0];
+        // RMS about the mean over rows `from..to`.
+        let rms = |from: usize, to: usize| {
+            let x = &force[from..to];
+            let mean = x.iter().sum::<f64>() / x.len() as f64;
+            (x.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / x.len() as f64).sqrt()
+        };
+        let (early, late) = (rms(10, 35), rms(2500, 4000));
+        assert!(late > 0.02, "the ripple shakes the sensor: {late} N RMS");
+        assert!(
+            (0.7..1.4).contains(&(early / late)),
+            "{early} N RMS in the first 5 ms, {late} N after half a second"
+        );
     }
 
     /// The context reaches the fingertip a latency after the controller sent it.
