@@ -1236,8 +1236,8 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         direction: [0.0; 2],
     };
     // The drive's ripple has rung the structure since long before: each body starts on its
-    // steady response to it, not at rest, where a lightly damped mode would take hundreds
-    // of ms to build up.
+    // steady response to it, not at rest, from which a lightly damped mode would build up
+    // over tens of ms.
     ripple.follow(c0.v);
     let (x, v) = ripple.steady_response(&chain, &controller);
     let mut b = Bodies {
