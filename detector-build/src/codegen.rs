@@ -147,9 +147,25 @@ impl Compiled {
                     self.feature_name(psi)
                 )
             };
+            // Without faults, a term whose CDF mirrors an earlier one's on the same feature is
+            // that one's complement (with faults both read 0 instead, as the interpreter does).
             let _ = writeln!(w, "                if faults == 0 {{");
-            for &(k, psi) in &psis {
-                let _ = writeln!(w, "                    {}", eval(k, psi));
+            for (n, &(k, psi)) in psis.iter().enumerate() {
+                let twin = psis[..n]
+                    .iter()
+                    .find(|(_, p)| p.slot == psi.slot && p.cdf.mirrors(&psi.cdf));
+                match twin {
+                    Some(&(j, _)) => {
+                        let _ = writeln!(
+                            w,
+                            "                    mirror_psi(state, {k}, {j}); // {:?}",
+                            self.feature_name(psi)
+                        );
+                    }
+                    None => {
+                        let _ = writeln!(w, "                    {}", eval(k, psi));
+                    }
+                }
             }
             let _ = writeln!(w, "                    return;\n                }}");
             for &(k, psi) in &psis {

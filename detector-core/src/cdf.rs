@@ -310,6 +310,16 @@ impl Cdf {
         Ok(Cdf(shape))
     }
 
+    /// Whether `other` gives every value one minus this function's confidence, bit for bit:
+    /// a rising and a falling sigmoid over the same range. Generated code evaluates such a
+    /// pair on one feature once (see `mirror_psi`).
+    pub fn mirrors(&self, other: &Cdf) -> bool {
+        match (self.0, other.0) {
+            (Shape::Rising(a), Shape::Falling(b)) | (Shape::Falling(a), Shape::Rising(b)) => a == b,
+            _ => false,
+        }
+    }
+
     /// The confidence this function gives a feature value.
     #[inline(always)]
     pub fn eval(&self, x: Signal) -> Confidence {
@@ -544,6 +554,30 @@ mod tests {
         };
         assert_eq!(eval(f, 0.0), 1.0);
         assert!((eval(f, 1.5) - 0.875).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_falling_sigmoid_mirrors_the_rising_one_over_the_same_range_only() {
+        let sigmoid =
+            |low, high, falling| Cdf::new(&CdfSpec::Sigmoid { low, high, falling }).expect("valid");
+        let (up, down) = (sigmoid(-0.3, 2.7, false), sigmoid(-0.3, 2.7, true));
+        assert!(up.mirrors(&down) && down.mirrors(&up));
+        for k in -400..400 {
+            let x = Signal::from_f32(k as f32 * 0.01);
+            let sum = u32::from(up.eval(x).to_bits()) + u32::from(down.eval(x).to_bits());
+            assert_eq!(sum, 1 << 15, "at {x:?}");
+        }
+        assert!(!up.mirrors(&up));
+        assert!(!up.mirrors(&sigmoid(-0.3, 2.8, true)));
+        let binary = |above| {
+            Cdf::new(&CdfSpec::Binary {
+                threshold: 1.0,
+                above,
+            })
+            .expect("valid")
+        };
+        // At the threshold both read 1: not a mirror image.
+        assert!(!binary(true).mirrors(&binary(false)));
     }
 
     #[test]

@@ -11,6 +11,6 @@ pub use crate::feature::{Stage, StageKind};
 pub use crate::num::{ChannelMask, Confidence, Tick};
 pub use crate::state::{
     Inputs, LevelParams, ONE, Output, State, clear_psi, decide_event, eq14, eval_psi, load_sample,
-    product, psi_value, reset_event, step_feature,
+    mirror_psi, product, psi_value, reset_event, step_feature,
 };
 pub use crate::tick::DetectorTick;
