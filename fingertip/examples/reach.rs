@@ -12,7 +12,13 @@
 //!   the contact's slow path judges (docs/simulator.md gives the film's event-free level).
 //!
 //! A detector can only find an event whose signal stands out of the sensors' own reading;
-//! where the right share falls with the signal, the misses are at the sensors' reach.
+//! where the right share falls with the signal, the misses are at the sensors' reach. For
+//! each scenario, the same measure is also taken where nothing happens: in each run started
+//! 100 ms sooner (the same plant, motion and sensors), over the same windows, which now end
+//! 40-50 ms before its event. Where an event's measure is below the largest of those, no
+//! threshold on it finds the event without reading steady motion as that event about as
+//! often; the threshold that would find 99.5 % of the events is printed with the share of
+//! event-free windows that reach it.
 
 mod seeds;
 
@@ -44,9 +50,14 @@ fn rms(axes: &[&[f64]], rows: std::ops::Range<usize>) -> f64 {
     (sum / n).sqrt()
 }
 
-/// The vibration a disturbance leaves on each sensor over the 30 ms before it: force,
-/// skin acceleration, position error (RMS ratios).
-fn vibration_ratios(tr: &Trace, on: usize) -> Option<[f64; 3]> {
+/// The vibration above 25 Hz on each sensor over `after` (a disturbance's first 50 ms) as
+/// an RMS over that of `before` (what it read just before): force, skin acceleration,
+/// position error.
+fn vibration_ratios(
+    tr: &Trace,
+    before: std::ops::Range<usize>,
+    after: std::ops::Range<usize>,
+) -> Option<[f64; 3]> {
     let rate = tr.rate_hz();
     let hp = |name: &str| tr.column(name).map(|c| high_pass(c, 25.0, rate));
     let (fx, fy, acc, ex, ey) = (
@@ -56,10 +67,7 @@ fn vibration_ratios(tr: &Trace, on: usize) -> Option<[f64; 3]> {
         hp("pos_err_x")?,
         hp("pos_err_y")?,
     );
-    // The filters settle in the run's first 10 ms; the onset is later.
-    let before = on.saturating_sub(30 * MS).max(10 * MS)..on;
-    let after = on..(on + 50 * MS).min(tr.len());
-    if before.is_empty() || after.is_empty() {
+    if before.is_empty() || after.is_empty() || after.end > tr.len() {
         return None;
     }
     let ratio = |axes: &[&[f64]]| rms(axes, after.clone()) / rms(axes, before.clone()).max(1e-12);
@@ -75,8 +83,19 @@ fn film_rise(tr: &Trace, on: usize) -> Option<f64> {
     (!before.is_empty() && !after.is_empty()).then(|| mean(after) - mean(before))
 }
 
-/// One run: its signal measure and whether the default detector got it right.
-fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(f64, [f64; 3], bool)> {
+/// The lead-in of a run's event-free twin (ms).
+const TWIN_LEAD_IN_MS: usize = 100;
+
+/// One run: its measure (for a disturbance the best of its three ratios), whether the
+/// default detector got it right, and the same measure on its event-free twin.
+struct Run {
+    best: f64,
+    ratios: [f64; 3],
+    right: bool,
+    event_free: f64,
+}
+
+fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<Run> {
     let opts = SimOptions {
         seed,
         randomize: true,
@@ -87,11 +106,42 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(f64, [f64; 3], bo
     let onset_s = tr.time().get(on).copied()?;
     let decisions = replay::replay(detector, &tr, |_, _, _| {}).ok()?;
     let right = classify(s.expected().map(|e| (e, onset_s)), &decisions).is_right();
+    // The event-free twin: the same run started 100 ms sooner, so that its event comes
+    // 100 ms after this run's onset.
+    let twin = sim::simulate(
+        &s,
+        &SimOptions {
+            lead_in_s: TWIN_LEAD_IN_MS as f64 * 1e-3,
+            ..opts
+        },
+    )
+    .ok()?;
     if s == Scenario::ContactVerySoft1 {
-        return Some((film_rise(&tr, on)?, [0.0; 3], right));
+        // The film's rise is judged up to 60 ms after `on`: the twin's event is later.
+        return Some(Run {
+            best: film_rise(&tr, on)?,
+            ratios: [0.0; 3],
+            right,
+            event_free: film_rise(&twin, on)?,
+        });
     }
-    let r = vibration_ratios(&tr, on)?;
-    Some((r.iter().copied().fold(0.0, f64::max), r, right))
+    // The filters settle in the run's first 10 ms; the onset is later.
+    let before = on.saturating_sub(30 * MS).max(10 * MS)..on;
+    let ratios = vibration_ratios(&tr, before.clone(), on..on + 50 * MS)?;
+    // The twin's windows end 50 ms before its event, as long as the run's.
+    let judged = on..on + 50 * MS;
+    let usual = on - before.len()..on;
+    let event_free = vibration_ratios(&twin, usual, judged)?;
+    Some(Run {
+        best: best_of(&ratios),
+        ratios,
+        right,
+        event_free: best_of(&event_free),
+    })
+}
+
+fn best_of(ratios: &[f64; 3]) -> f64 {
+    ratios.iter().copied().fold(0.0, f64::max)
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -103,7 +153,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         base + runs - 1
     );
     for s in Scenario::disturbances().chain([Scenario::ContactVerySoft1]) {
-        let results: Vec<(f64, [f64; 3], bool)> = (base..base + runs)
+        let results: Vec<Run> = (base..base + runs)
             .into_par_iter()
             .filter_map(|seed| run(&detector, s, seed))
             .collect();
@@ -127,12 +177,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 edges[b - 1]
             };
             let hi = edges.get(b).copied().unwrap_or(f64::INFINITY);
-            let mut inside: Vec<&(f64, [f64; 3], bool)> =
-                results.iter().filter(|r| (lo..hi).contains(&r.0)).collect();
+            let mut inside: Vec<&Run> = results
+                .iter()
+                .filter(|r| (lo..hi).contains(&r.best))
+                .collect();
             if inside.is_empty() {
                 continue;
             }
-            let right = inside.iter().filter(|r| r.2).count();
+            let right = inside.iter().filter(|r| r.right).count();
             let label = match (b, edges.get(b)) {
                 (0, Some(h)) => format!("< {h}"),
                 (_, Some(h)) => format!("{lo}-{h}"),
@@ -141,9 +193,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let medians = if s == Scenario::ContactVerySoft1 {
                 String::new()
             } else {
-                let median = |k: usize, v: &mut Vec<&(f64, [f64; 3], bool)>| {
-                    v.sort_by(|a, b| a.1[k].total_cmp(&b.1[k]));
-                    v[v.len() / 2].1[k]
+                let median = |k: usize, v: &mut Vec<&Run>| {
+                    v.sort_by(|a, b| a.ratios[k].total_cmp(&b.ratios[k]));
+                    v[v.len() / 2].ratios[k]
                 };
                 format!(
                     "{:.1} / {:.1} / {:.1}",
@@ -158,6 +210,40 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 100.0 * right as f64 / inside.len() as f64
             );
         }
+        print_event_free(&results);
     }
     Ok(())
+}
+
+/// How high the measure reads where nothing happens, and how many events read below that.
+fn print_event_free(results: &[Run]) {
+    let mut free: Vec<f64> = results.iter().map(|r| r.event_free).collect();
+    if free.is_empty() {
+        return;
+    }
+    free.sort_by(f64::total_cmp);
+    let quantile = |q: f64| free[((free.len() - 1) as f64 * q).round() as usize];
+    let largest = quantile(1.0);
+    let below: Vec<&Run> = results.iter().filter(|r| r.best < largest).collect();
+    let right = below.iter().filter(|r| r.right).count();
+    println!(
+        "  where nothing happens (each run's twin, {TWIN_LEAD_IN_MS} ms sooner): median {:.2}, \
+         99 % below {:.2}, largest {largest:.2}; {} of the events ({:.1} %) read below that \
+         largest, {right} of them right",
+        quantile(0.5),
+        quantile(0.99),
+        below.len(),
+        100.0 * below.len() as f64 / results.len() as f64
+    );
+    // The threshold that would pass 99.5 % of the events, and how much steady motion it
+    // would pass too.
+    let mut events: Vec<f64> = results.iter().map(|r| r.best).collect();
+    events.sort_by(f64::total_cmp);
+    let threshold = events[((events.len() - 1) as f64 * 0.005).round() as usize];
+    let passed = free.iter().filter(|&&f| f >= threshold).count();
+    println!(
+        "  a threshold passing 99.5 % of the events is at most {threshold:.2}, which {:.1} % of \
+         the event-free windows reach",
+        100.0 * passed as f64 / free.len() as f64
+    );
 }
