@@ -532,8 +532,8 @@ pub fn eval_psi(state: &mut State, k: usize, slot: u8, cdf: &Cdf) -> u32 {
 }
 
 /// Sets ψ `k` to one minus ψ `j`, evaluated before it this tick: `k`'s CDF mirrors `j`'s on
-/// the same feature ([`Cdf::mirrors`]), so this is what [`eval_psi`] would store, in four
-/// instructions instead of a CDF's evaluation.
+/// the same feature ([`Cdf::mirrors`]), so this is what [`eval_psi`] would store, by a
+/// subtraction instead of a CDF's evaluation.
 #[inline(always)]
 pub fn mirror_psi(state: &mut State, k: usize, j: usize) {
     state.psi[k & (MAX_PSI - 1)] = (1 << 15) - state.psi[j & (MAX_PSI - 1)];
