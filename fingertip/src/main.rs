@@ -58,6 +58,10 @@ enum Command {
         /// started with the run has learnt its sensors' usual readings.
         #[arg(long, default_value_t = 0.0)]
         lead_in_ms: f64,
+        /// Multiplies every sensor's white noise beyond its drawn noise scale (0 to 10): a
+        /// run on sensors noisier (or quieter) than the envelope's.
+        #[arg(long, default_value_t = 1.0)]
+        noise_factor: f64,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -249,7 +253,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -267,6 +271,11 @@ enum Command {
         /// the paper does; a lead-in shows which misses come from that cold start.
         #[arg(long, default_value_t = 0.0, conflicts_with = "traces")]
         lead_in_ms: f64,
+        /// Multiplies every sensor's white noise beyond its drawn noise scale (0 to 10):
+        /// how the detectors fare on sensors noisier (or quieter) than the envelope's, the
+        /// false alarms in event-free motion included.
+        #[arg(long, default_value_t = 1.0)]
+        noise_factor: f64,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -393,6 +402,7 @@ fn run(cli: Cli) -> Result<()> {
             randomize,
             duration,
             lead_in_ms,
+            noise_factor,
             out,
         } => simulate(
             &scenario,
@@ -401,6 +411,7 @@ fn run(cli: Cli) -> Result<()> {
                 randomize,
                 duration_s: duration,
                 lead_in_s: lead_in_ms / 1000.0,
+                noise_factor,
                 ..SimOptions::default()
             },
             out.as_deref(),
@@ -533,6 +544,7 @@ fn run(cli: Cli) -> Result<()> {
             config,
             free_hours,
             lead_in_ms,
+            noise_factor,
             json,
             plot_bins,
             ..
@@ -542,6 +554,7 @@ fn run(cli: Cli) -> Result<()> {
                 seed,
                 free_hours,
                 lead_in_ms,
+                noise_factor,
             },
             &config,
             (json.as_deref(), plot_bins.as_deref()),
@@ -1511,6 +1524,8 @@ struct Plan {
     free_hours: f64,
     /// How long each single-event run's motion runs before its event window (ms).
     lead_in_ms: f64,
+    /// Multiplies every sensor's white noise ([`SimOptions::noise_factor`]).
+    noise_factor: f64,
 }
 
 /// One randomized run of `evaluate`.
@@ -1587,6 +1602,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         randomize: true,
         duration_s: job.duration_s(),
         lead_in_s: plan.lead_in_ms / 1000.0,
+        noise_factor: plan.noise_factor,
         ..SimOptions::default()
     };
     let trace = sim::simulate(&scenario, &opts)?;
@@ -1673,11 +1689,13 @@ struct Tally {
     failures: Vec<(Scenario, u64, Outcome)>,
     /// The single-event runs' lead-in (ms), to reproduce them.
     lead_in_ms: f64,
+    /// The runs' noise factor, to reproduce them.
+    noise_factor: f64,
 }
 
 impl Tally {
-    /// The tally of detector `d`'s outcomes in runs with a lead-in of `lead_in_ms`.
-    fn of(results: &[JobResult], d: usize, lead_in_ms: f64) -> Tally {
+    /// The tally of detector `d`'s outcomes in the runs of `plan`.
+    fn of(results: &[JobResult], d: usize, plan: &Plan) -> Tally {
         let scenarios = Scenario::single_event();
         let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); scenarios.len()];
         let mut bins: Vec<Vec<Option<usize>>> = vec![Vec::new(); scenarios.len()];
@@ -1724,7 +1742,8 @@ impl Tally {
             free_alarms,
             free_hours: free_seconds / 3600.0,
             failures,
-            lead_in_ms,
+            lead_in_ms: plan.lead_in_ms,
+            noise_factor: plan.noise_factor,
         }
     }
 
@@ -1773,13 +1792,16 @@ impl Tally {
                 continue;
             }
             // What `simulate` needs besides the seed to draw the same run.
-            let options = if *scenario == Scenario::FreeMotion {
+            let mut options = if *scenario == Scenario::FreeMotion {
                 format!(" --duration {FREE_RUN_S}")
             } else if self.lead_in_ms > 0.0 {
                 format!(" --lead-in-ms {}", self.lead_in_ms)
             } else {
                 String::new()
             };
+            if self.noise_factor != 1.0 {
+                options += &format!(" --noise-factor {}", self.noise_factor);
+            }
             println!(
                 "  {:<26} --seed {seed}{options}: {outcome}",
                 scenario.name()
@@ -1902,6 +1924,7 @@ fn evaluate(
         seed,
         free_hours,
         lead_in_ms,
+        noise_factor,
     } = plan;
     let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
@@ -1928,29 +1951,39 @@ fn evaluate(
             fingertip::readable(lead_in_ms)
         );
     }
+    if !(noise_factor.is_finite() && (0.0..=sim::MAX_NOISE_FACTOR).contains(&noise_factor)) {
+        bail!(
+            "--noise-factor = {} must be within 0..={}",
+            fingertip::readable(noise_factor),
+            sim::MAX_NOISE_FACTOR
+        );
+    }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
     let (results, wall) = run_jobs(&detectors, &plan, free_runs)?;
     let tallies: Vec<(String, Tally)> = names
         .into_iter()
         .enumerate()
-        .map(|(d, name)| (name, Tally::of(&results, d, lead_in_ms)))
+        .map(|(d, name)| (name, Tally::of(&results, d, &plan)))
         .collect();
     let simulated_s: f64 = results.iter().map(|r| r.seconds).sum();
     let speed = simulated_s / wall.max(1e-9);
 
-    let lead_in = if lead_in_ms > 0.0 {
+    let mut conditions = if lead_in_ms > 0.0 {
         format!(", each event after a lead-in of {lead_in_ms} ms")
     } else {
         String::new()
     };
+    if noise_factor != 1.0 {
+        conditions += &format!(", sensor noise {noise_factor} times the drawn");
+    }
     match tallies.as_slice() {
         [(name, tally)] => {
-            println!("{name}: {runs} randomized runs per scenario, base seed {seed}{lead_in}");
+            println!("{name}: {runs} randomized runs per scenario, base seed {seed}{conditions}");
             tally.print();
         }
         _ => {
             println!(
-                "{runs} randomized runs per scenario, base seed {seed}{lead_in}, the same runs for each detector"
+                "{runs} randomized runs per scenario, base seed {seed}{conditions}, the same runs for each detector"
             );
             print_comparison(&tallies);
         }
@@ -1965,6 +1998,7 @@ fn evaluate(
             "runs_per_scenario": runs,
             "seed": seed,
             "lead_in_ms": lead_in_ms,
+            "noise_factor": noise_factor,
             "simulated_s_per_wall_s": speed,
         });
         // One detector: its fields at the top level; several: a list of them.

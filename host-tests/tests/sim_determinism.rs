@@ -235,3 +235,50 @@ fn a_lead_in_delays_the_event_and_nothing_else() {
     };
     assert_eq!(free(0.0), free(lead_in));
 }
+
+/// A noise factor scales the sensors' white noise and nothing else: the same drawn plant,
+/// the same motion and event, the force sensor's noise about that many times larger around
+/// the same reading, and the trace recording it.
+#[test]
+fn a_noise_factor_scales_the_noise_and_nothing_else() {
+    let run = |noise_factor| {
+        sim::simulate(
+            &Scenario::ContactSoft5,
+            &SimOptions {
+                noise_factor,
+                ..opts(8, true)
+            },
+        )
+        .unwrap()
+    };
+    let (base, loud, silent) = (run(1.0), run(3.0), run(0.0));
+    assert_eq!(base.meta("noise_factor"), None);
+    assert_eq!(loud.meta("noise_factor"), Some("3"));
+    assert_eq!(base.meta("onset_s"), loud.meta("onset_s"));
+    assert_eq!(
+        base.meta("param.plant.skin_mass"),
+        loud.meta("param.plant.skin_mass")
+    );
+    let scale = |t: &fingertip::trace::Trace| -> f64 {
+        t.meta("param.sensors.noise_scale")
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+    assert!((scale(&loud) / scale(&base) - 3.0).abs() < 1e-9);
+    assert_eq!(scale(&silent), 0.0);
+    assert_eq!(base.column("vel_des_x"), loud.column("vel_des_x"));
+    // Before the contact, the force sensor reads the same motion: the readings' spread
+    // around the noise-free run's grows with the factor.
+    let (on, _) = base.truth_onset().unwrap();
+    let spread = |t: &fingertip::trace::Trace| {
+        let (x, clean) = (
+            t.column("force_x").unwrap(),
+            silent.column("force_x").unwrap(),
+        );
+        let sq: f64 = (0..on).map(|k| (x[k] - clean[k]).powi(2)).sum();
+        (sq / on as f64).sqrt()
+    };
+    let ratio = spread(&loud) / spread(&base);
+    assert!((2.5..3.5).contains(&ratio), "noise grew {ratio} times");
+}

@@ -157,6 +157,18 @@ fn bad_options_are_errors_not_panics() {
             lead_in_s: f64::NAN,
             ..SimOptions::default()
         },
+        SimOptions {
+            noise_factor: -0.5,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            noise_factor: 11.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            noise_factor: f64::INFINITY,
+            ..SimOptions::default()
+        },
     ];
     for o in bad {
         let e = sim::simulate(&Scenario::ContactHard8, &o).unwrap_err();

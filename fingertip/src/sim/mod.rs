@@ -163,6 +163,9 @@ pub const CHANNELS: [ChannelSpec; 10] = [
 /// The longest lead-in a run takes ([`SimOptions::lead_in_s`], s).
 pub const MAX_LEAD_IN_S: f64 = 10.0;
 
+/// The largest [`SimOptions::noise_factor`].
+pub const MAX_NOISE_FACTOR: f64 = 10.0;
+
 /// Metadata key of the physical onset time in seconds (absent when nothing happened).
 pub const META_ONSET: &str = "onset_s";
 /// Metadata key of the scenario name.
@@ -652,6 +655,11 @@ pub struct SimOptions {
     /// then. 0, the default, is the paper's protocol: the detector starts cold 15-40 ms
     /// before the event. Free motion has no event and ignores it.
     pub lead_in_s: f64,
+    /// Multiplies every analog channel's white noise beyond its drawn
+    /// `sensors.noise_scale` (0 to 10; 1, the default, keeps the envelope): how a detector
+    /// fares on sensors noisier (or quieter) than any simulated. The trace records the
+    /// noise scale in effect and this factor.
+    pub noise_factor: f64,
 }
 
 impl Default for SimOptions {
@@ -663,6 +671,7 @@ impl Default for SimOptions {
             controller_rate_hz: DEFAULT_CONTROLLER_RATE_HZ,
             duration_s: None,
             lead_in_s: 0.0,
+            noise_factor: 1.0,
         }
     }
 }
@@ -765,6 +774,13 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         )?;
     }
     check("lead_in_s", opts.lead_in_s, 0.0, MAX_LEAD_IN_S, "0 to 10 s")?;
+    check(
+        "noise_factor",
+        opts.noise_factor,
+        0.0,
+        MAX_NOISE_FACTOR,
+        "0 to 10",
+    )?;
     Ok(())
 }
 
@@ -782,7 +798,8 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     let mut traj_rng = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 2));
     let r = opts.randomize;
     let plant = Plant::choose(&mut prng, r);
-    let sensors = Sensors::choose(&mut prng, r);
+    let mut sensors = Sensors::choose(&mut prng, r);
+    sensors.noise_scale *= opts.noise_factor;
     let mut meta: Vec<(String, String)> = Vec::new();
     let mut values: Vec<(String, f64)> = plant.values();
     values.extend(sensors.values());
@@ -1220,6 +1237,9 @@ fn push_metadata(
     trace.push_metadata("internal_rate_hz", &fmt_f64(opts.rate_hz * n_over as f64))?;
     if opts.lead_in_s > 0.0 && !matches!(scenario.kind(), Kind::Free) {
         trace.push_metadata("lead_in_s", &fmt_f64(opts.lead_in_s))?;
+    }
+    if opts.noise_factor != 1.0 {
+        trace.push_metadata("noise_factor", &fmt_f64(opts.noise_factor))?;
     }
     if let Some(s) = scheduled_onset {
         trace.push_metadata("scheduled_onset_s", &fmt_f64(s))?;
