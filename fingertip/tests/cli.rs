@@ -618,6 +618,8 @@ fn evaluate_bounds_its_counts() {
         (["--free-hours=-1", "--runs=1"], "--free-hours"),
         (["--lead-in-ms=-1", "--runs=1"], "--lead-in-ms = -1"),
         (["--lead-in-ms", "1e9"], "--lead-in-ms = 1e9"),
+        (["--noise-factor=-1", "--runs=1"], "--noise-factor = -1"),
+        (["--noise-factor", "11"], "--noise-factor = 11"),
     ] {
         let mut all = vec!["evaluate"];
         all.extend(args);
@@ -688,6 +690,56 @@ fn evaluate_gives_runs_a_lead_in() {
         "{}",
         text(&clash.stderr)
     );
+}
+
+/// `--noise-factor` scales every sensor's white noise in every run: the report says so,
+/// its JSON carries it, and each failure line reproduces its run with it (after the
+/// free-motion run's length), the trace `simulate` writes then recording it.
+#[test]
+fn evaluate_scales_the_sensor_noise() {
+    let dir = scratch("noise_factor");
+    let json = dir.join("report.json");
+    let out = fingertip(&[
+        "evaluate",
+        "--runs",
+        "2",
+        "--free-hours",
+        "0.02",
+        "--noise-factor",
+        "3",
+        "--config",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/paper.toml"),
+        "--json",
+        json.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stdout = text(&out.stdout);
+    assert!(
+        stdout.contains("sensor noise 3 times the drawn"),
+        "{stdout}"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    assert_eq!(report["noise_factor"], 3.0);
+    // The paper's detector gets some of these wrong; its first failure's line is run again.
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("  ") && l.contains(" --seed "))
+        .expect("a failure line");
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let at = words
+        .iter()
+        .position(|w| *w == "--noise-factor")
+        .expect("the factor");
+    assert_eq!(words[at + 1], "3:", "{line}");
+    let trace = dir.join("run.csv");
+    let mut args = vec!["simulate", words[0], "--randomize"];
+    args.extend(words[1..at + 1].iter().copied());
+    args.extend(["3", "--out", trace.to_str().expect("utf-8")]);
+    let sim = fingertip(&args);
+    assert!(sim.status.success(), "{}", text(&sim.stderr));
+    let csv = std::fs::read_to_string(&trace).expect("trace");
+    assert!(csv.contains("# noise_factor: 3\n"), "{}", &csv[..400]);
 }
 
 /// `evaluate --traces` on a directory of recordings: every `*.csv` under it (hidden files
