@@ -38,6 +38,27 @@ fn simulate(dir: &Path, scenario: &str) -> PathBuf {
     path
 }
 
+/// The first failure line of an `evaluate` report, and the trace `simulate` writes for the
+/// run it names, given the options the line gives (`NAME --seed SEED [OPTION VALUE]...:`).
+fn rerun_first_failure(stdout: &str, dir: &Path) -> (String, String) {
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("  ") && l.contains(" --seed "))
+        .expect("a failure line");
+    let (run, _) = line.split_once(':').expect("the outcome after a colon");
+    let words: Vec<&str> = run.split_whitespace().collect();
+    let trace = dir.join("run.csv");
+    let mut args = vec!["simulate", words[0], "--randomize"];
+    args.extend(&words[1..]);
+    args.extend(["--out", trace.to_str().expect("utf-8")]);
+    let sim = fingertip(&args);
+    assert!(sim.status.success(), "{}", text(&sim.stderr));
+    (
+        line.to_string(),
+        std::fs::read_to_string(&trace).expect("trace"),
+    )
+}
+
 /// Every nominal Table 1 run confirms its expected event first (and the sudden
 /// accelerations nothing), within the paper's 20 ms.
 #[test]
@@ -661,27 +682,10 @@ fn evaluate_gives_runs_a_lead_in() {
         serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
     assert_eq!(report["lead_in_ms"], 200.0);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
-    let line = stdout
-        .lines()
-        .find(|l| l.starts_with("  ") && l.contains(" --seed "))
-        .expect("a failure line");
+    let (line, csv) = rerun_first_failure(&stdout, &dir);
     let words: Vec<&str> = line.split_whitespace().collect();
     assert_eq!(words[1], "--seed", "{line}");
     assert_eq!(words[3..5], ["--lead-in-ms", "200:"], "{line}");
-    let trace = dir.join("run.csv");
-    let sim = fingertip(&[
-        "simulate",
-        words[0],
-        "--randomize",
-        "--seed",
-        words[2],
-        "--lead-in-ms",
-        "200",
-        "--out",
-        trace.to_str().expect("utf-8"),
-    ]);
-    assert!(sim.status.success(), "{}", text(&sim.stderr));
-    let csv = std::fs::read_to_string(&trace).expect("trace");
     assert!(csv.contains("# lead_in_s: 0.2\n"), "{}", &csv[..400]);
     let clash = fingertip(&["evaluate", "--traces", ".", "--lead-in-ms", "5"]);
     assert!(!clash.status.success());
@@ -722,23 +726,8 @@ fn evaluate_scales_the_sensor_noise() {
         serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
     assert_eq!(report["noise_factor"], 3.0);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
-    let line = stdout
-        .lines()
-        .find(|l| l.starts_with("  ") && l.contains(" --seed "))
-        .expect("a failure line");
-    let words: Vec<&str> = line.split_whitespace().collect();
-    let at = words
-        .iter()
-        .position(|w| *w == "--noise-factor")
-        .expect("the factor");
-    assert_eq!(words[at + 1], "3:", "{line}");
-    let trace = dir.join("run.csv");
-    let mut args = vec!["simulate", words[0], "--randomize"];
-    args.extend(words[1..at + 1].iter().copied());
-    args.extend(["3", "--out", trace.to_str().expect("utf-8")]);
-    let sim = fingertip(&args);
-    assert!(sim.status.success(), "{}", text(&sim.stderr));
-    let csv = std::fs::read_to_string(&trace).expect("trace");
+    let (line, csv) = rerun_first_failure(&stdout, &dir);
+    assert!(line.contains(" --noise-factor 3:"), "{line}");
     assert!(csv.contains("# noise_factor: 3\n"), "{}", &csv[..400]);
 }
 
