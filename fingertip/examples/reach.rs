@@ -127,11 +127,10 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<Run> {
     }
     // The filters settle in the run's first 10 ms; the onset is later.
     let before = on.saturating_sub(30 * MS).max(10 * MS)..on;
-    let ratios = vibration_ratios(&tr, before.clone(), on..on + 50 * MS)?;
-    // The twin's windows end 50 ms before its event, as long as the run's.
-    let judged = on..on + 50 * MS;
-    let usual = on - before.len()..on;
-    let event_free = vibration_ratios(&twin, usual, judged)?;
+    let after = on..on + 50 * MS;
+    let ratios = vibration_ratios(&tr, before.clone(), after.clone())?;
+    // The same windows in the twin end 50 ms before its event.
+    let event_free = vibration_ratios(&twin, before, after)?;
     Some(Run {
         best: best_of(&ratios),
         ratios,
