@@ -62,6 +62,10 @@ enum Command {
         /// run on sensors noisier (or quieter) than the envelope's.
         #[arg(long, default_value_t = 1.0)]
         noise_factor: f64,
+        /// The resolution of the tip position the controller reads from its joint encoders
+        /// (µm, 0.1 to 100; the envelope's is 1): a run on an arm whose encoders are coarser.
+        #[arg(long, default_value_t = 1.0)]
+        encoder_um: f64,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -253,7 +257,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -276,6 +280,11 @@ enum Command {
         /// false alarms in event-free motion included.
         #[arg(long, default_value_t = 1.0)]
         noise_factor: f64,
+        /// The resolution of the tip position the controller reads from its joint encoders
+        /// (µm, 0.1 to 100; the envelope's is 1): how the detectors fare on an arm whose
+        /// encoders are coarser, its loops acting on them.
+        #[arg(long, default_value_t = 1.0)]
+        encoder_um: f64,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -403,6 +412,7 @@ fn run(cli: Cli) -> Result<()> {
             duration,
             lead_in_ms,
             noise_factor,
+            encoder_um,
             out,
         } => simulate(
             &scenario,
@@ -412,6 +422,7 @@ fn run(cli: Cli) -> Result<()> {
                 duration_s: duration,
                 lead_in_s: lead_in_ms / 1000.0,
                 noise_factor,
+                encoder_resolution_um: encoder_um,
                 ..SimOptions::default()
             },
             out.as_deref(),
@@ -545,6 +556,7 @@ fn run(cli: Cli) -> Result<()> {
             free_hours,
             lead_in_ms,
             noise_factor,
+            encoder_um,
             json,
             plot_bins,
             ..
@@ -555,6 +567,7 @@ fn run(cli: Cli) -> Result<()> {
                 free_hours,
                 lead_in_ms,
                 noise_factor,
+                encoder_um,
             },
             &config,
             (json.as_deref(), plot_bins.as_deref()),
@@ -1526,6 +1539,8 @@ struct Plan {
     lead_in_ms: f64,
     /// Multiplies every sensor's white noise ([`SimOptions::noise_factor`]).
     noise_factor: f64,
+    /// The encoders' resolution at the tip, µm ([`SimOptions::encoder_resolution_um`]).
+    encoder_um: f64,
 }
 
 /// One randomized run of `evaluate`.
@@ -1603,6 +1618,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         duration_s: job.duration_s(),
         lead_in_s: plan.lead_in_ms / 1000.0,
         noise_factor: plan.noise_factor,
+        encoder_resolution_um: plan.encoder_um,
         ..SimOptions::default()
     };
     let trace = sim::simulate(&scenario, &opts)?;
@@ -1689,8 +1705,9 @@ struct Tally {
     failures: Vec<(Scenario, u64, Outcome)>,
     /// The single-event runs' lead-in (ms), to reproduce them.
     lead_in_ms: f64,
-    /// The runs' noise factor, to reproduce them.
+    /// The runs' noise factor and encoder resolution (µm), to reproduce them.
     noise_factor: f64,
+    encoder_um: f64,
 }
 
 impl Tally {
@@ -1744,6 +1761,7 @@ impl Tally {
             failures,
             lead_in_ms: plan.lead_in_ms,
             noise_factor: plan.noise_factor,
+            encoder_um: plan.encoder_um,
         }
     }
 
@@ -1801,6 +1819,9 @@ impl Tally {
             };
             if self.noise_factor != 1.0 {
                 options += &format!(" --noise-factor {}", self.noise_factor);
+            }
+            if self.encoder_um != 1.0 {
+                options += &format!(" --encoder-um {}", self.encoder_um);
             }
             println!(
                 "  {:<26} --seed {seed}{options}: {outcome}",
@@ -1925,6 +1946,7 @@ fn evaluate(
         free_hours,
         lead_in_ms,
         noise_factor,
+        encoder_um,
     } = plan;
     let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
@@ -1958,6 +1980,13 @@ fn evaluate(
             sim::MAX_NOISE_FACTOR
         );
     }
+    let (finest, coarsest) = sim::ENCODER_RESOLUTION_RANGE_UM;
+    if !(encoder_um.is_finite() && (finest..=coarsest).contains(&encoder_um)) {
+        bail!(
+            "--encoder-um = {} must be within {finest}..={coarsest} um",
+            fingertip::readable(encoder_um)
+        );
+    }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
     let (results, wall) = run_jobs(&detectors, &plan, free_runs)?;
     let tallies: Vec<(String, Tally)> = names
@@ -1975,6 +2004,9 @@ fn evaluate(
     };
     if noise_factor != 1.0 {
         conditions += &format!(", sensor noise {noise_factor} times the drawn");
+    }
+    if encoder_um != 1.0 {
+        conditions += &format!(", encoders resolving {encoder_um} um at the tip");
     }
     match tallies.as_slice() {
         [(name, tally)] => {
@@ -1999,6 +2031,7 @@ fn evaluate(
             "seed": seed,
             "lead_in_ms": lead_in_ms,
             "noise_factor": noise_factor,
+            "encoder_um": encoder_um,
             "simulated_s_per_wall_s": speed,
         });
         // One detector: its fields at the top level; several: a list of them.

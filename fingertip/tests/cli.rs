@@ -641,6 +641,8 @@ fn evaluate_bounds_its_counts() {
         (["--lead-in-ms", "1e9"], "--lead-in-ms = 1e9"),
         (["--noise-factor=-1", "--runs=1"], "--noise-factor = -1"),
         (["--noise-factor", "11"], "--noise-factor = 11"),
+        (["--encoder-um", "0.01"], "--encoder-um = 0.01"),
+        (["--encoder-um=200", "--runs=1"], "--encoder-um = 200"),
     ] {
         let mut all = vec!["evaluate"];
         all.extend(args);
@@ -696,12 +698,13 @@ fn evaluate_gives_runs_a_lead_in() {
     );
 }
 
-/// `--noise-factor` scales every sensor's white noise in every run: the report says so,
-/// its JSON carries it, and each failure line reproduces its run with it (after the
-/// free-motion run's length), the trace `simulate` writes then recording it.
+/// `--noise-factor` scales every sensor's white noise and `--encoder-um` sets the
+/// encoders' resolution in every run: the report says so, its JSON carries them, and each
+/// failure line reproduces its run with them (after the free-motion run's length), the
+/// trace `simulate` writes then recording them.
 #[test]
-fn evaluate_scales_the_sensor_noise() {
-    let dir = scratch("noise_factor");
+fn evaluate_runs_beyond_the_envelope() {
+    let dir = scratch("beyond");
     let json = dir.join("report.json");
     let out = fingertip(&[
         "evaluate",
@@ -711,6 +714,8 @@ fn evaluate_scales_the_sensor_noise() {
         "0.02",
         "--noise-factor",
         "3",
+        "--encoder-um",
+        "5",
         "--config",
         concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/paper.toml"),
         "--json",
@@ -719,16 +724,22 @@ fn evaluate_scales_the_sensor_noise() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stdout = text(&out.stdout);
     assert!(
-        stdout.contains("sensor noise 3 times the drawn"),
+        stdout.contains("sensor noise 3 times the drawn, encoders resolving 5 um at the tip"),
         "{stdout}"
     );
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
     assert_eq!(report["noise_factor"], 3.0);
+    assert_eq!(report["encoder_um"], 5.0);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
     let (line, csv) = rerun_first_failure(&stdout, &dir);
-    assert!(line.contains(" --noise-factor 3:"), "{line}");
+    assert!(line.contains(" --noise-factor 3 --encoder-um 5:"), "{line}");
     assert!(csv.contains("# noise_factor: 3\n"), "{}", &csv[..400]);
+    assert!(
+        csv.contains("# encoder_resolution_um: 5\n"),
+        "{}",
+        &csv[..400]
+    );
 }
 
 /// `evaluate --traces` on a directory of recordings: every `*.csv` under it (hidden files

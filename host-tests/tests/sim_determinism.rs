@@ -282,3 +282,43 @@ fn a_noise_factor_scales_the_noise_and_nothing_else() {
     let ratio = spread(&loud) / spread(&base);
     assert!((2.5..3.5).contains(&ratio), "noise grew {ratio} times");
 }
+
+/// An encoder resolution is what the controller reads the tip's position in: while the
+/// finger cruises, each context message's position error moves by the commanded travel
+/// less a whole number of encoder steps, 20 µm ones when asked for; the default is the
+/// envelope's 1 µm run, unrecorded, and the trace records another.
+#[test]
+fn an_encoder_resolution_quantizes_what_the_controller_reads() {
+    let run = |encoder_resolution_um| {
+        sim::simulate(
+            &Scenario::ContactHard8,
+            &SimOptions {
+                encoder_resolution_um,
+                ..opts(4, false)
+            },
+        )
+        .unwrap()
+    };
+    let (fine, coarse) = (run(1.0), run(20.0));
+    assert_eq!(
+        fine,
+        sim::simulate(&Scenario::ContactHard8, &opts(4, false)).unwrap()
+    );
+    assert_eq!(fine.meta("encoder_resolution_um"), None);
+    assert_eq!(coarse.meta("encoder_resolution_um"), Some("20"));
+    // Steps of the controller's reading over one context period (5 rows at 5 kHz), in
+    // 20 µm steps, before the contact.
+    let steps = |t: &fingertip::trace::Trace| -> Vec<f64> {
+        let (e, v) = (
+            t.column("pos_err_x").unwrap(),
+            t.column("vel_des_x").unwrap(),
+        );
+        let (on, _) = t.truth_onset().unwrap();
+        (20..on - 5)
+            .map(|k| (v[k] * 1e-3 - (e[k + 5] - e[k])) / 20e-6)
+            .collect()
+    };
+    let off_grid = |s: &[f64]| s.iter().map(|x| (x - x.round()).abs()).fold(0.0, f64::max);
+    assert!(off_grid(&steps(&coarse)) < 1e-3, "{:?}", steps(&coarse));
+    assert!(off_grid(&steps(&fine)) > 0.02, "{:?}", steps(&fine));
+}

@@ -169,6 +169,18 @@ fn bad_options_are_errors_not_panics() {
             noise_factor: f64::INFINITY,
             ..SimOptions::default()
         },
+        SimOptions {
+            encoder_resolution_um: 0.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            encoder_resolution_um: 200.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            encoder_resolution_um: f64::NAN,
+            ..SimOptions::default()
+        },
     ];
     for o in bad {
         let e = sim::simulate(&Scenario::ContactHard8, &o).unwrap_err();

@@ -69,7 +69,8 @@ const GRAVITY: f64 = 9.81;
 /// Below this speed the drive's Coulomb friction is regularized (proportional to speed).
 const FRICTION_SPEED: f64 = 0.001;
 
-/// Resolution of the tip position the controller computes from its joint encoders.
+/// Resolution of the tip position the controller computes from its joint encoders, unless
+/// a run sets its own ([`super::SimOptions::encoder_resolution_um`]).
 pub(crate) const ENCODER_RESOLUTION: f64 = 1e-6;
 
 /// The fastest approach of any scenario (m/s), for bounding impact forces.
@@ -309,6 +310,8 @@ pub(crate) struct Setup {
     pub oversampling: usize,
     /// The rate of the controller's context messages (and of its trajectory's ticks).
     pub context_rate_hz: f64,
+    /// The resolution of the tip position the controller reads from its encoders (m).
+    pub encoder_resolution: f64,
 }
 
 /// What the physical event was.
@@ -604,9 +607,10 @@ fn solve(mut m: [[f64; 13]; 12]) -> Option<[f64; 12]> {
     Some(x)
 }
 
-/// The tip position the controller measures: the arm's, quantized by the encoders.
-fn encoder(x: f64) -> f64 {
-    round(x / ENCODER_RESOLUTION) * ENCODER_RESOLUTION
+/// The tip position the controller measures: the arm's, quantized by encoders of
+/// `resolution`.
+fn encoder(x: f64, resolution: f64) -> f64 {
+    round(x / resolution) * resolution
 }
 
 /// The integration step at or after time `t` of a clock at `internal_rate` (Hz).
@@ -701,10 +705,12 @@ struct Controller {
     tick: u64,
     /// The integration step of the next tick.
     next_step: u64,
+    /// The encoders' resolution at the tip (m).
+    encoder: f64,
 }
 
 impl Controller {
-    fn new(p: &Plant, chain: &Chain, internal_rate: f64) -> Controller {
+    fn new(p: &Plant, chain: &Chain, internal_rate: f64, encoder: f64) -> Controller {
         let m = chain.total_mass;
         let wc = TAU * p.control_bandwidth;
         let share = p.friction_compensation;
@@ -729,6 +735,7 @@ impl Controller {
             force: [0.0; 2],
             tick: 0,
             next_step: 0,
+            encoder,
         }
     }
 
@@ -751,7 +758,7 @@ impl Controller {
         }
         let cmd = trajectory.at_time(self.tick as f64 / self.rate);
         let pd: [f64; 2] = std::array::from_fn(|k| {
-            self.kp * (cmd.p[k] - encoder(b.xa[k])) + self.kd * (cmd.v[k] - b.va[k])
+            self.kp * (cmd.p[k] - encoder(b.xa[k], self.encoder)) + self.kd * (cmd.v[k] - b.va[k])
         });
         let pd = mul(&self.shape, pd);
         let ff = mul(&self.model_mass, cmd.a);
@@ -776,6 +783,8 @@ struct ContextLink {
     /// What the fingertip last received: position error, commanded velocity and
     /// acceleration (x, y), as sent (rounded to 1e-9 of their unit).
     received: [f64; 6],
+    /// The encoders' resolution at the tip (m), as the controller reads them.
+    encoder: f64,
 }
 
 impl ContextLink {
@@ -783,8 +792,8 @@ impl ContextLink {
     fn message(&self, tick: u64, trajectory: &mut Trajectory, b: &Bodies) -> [f64; 6] {
         let cmd = trajectory.at(tick);
         [
-            cmd.p[0] - encoder(b.xa[0]),
-            cmd.p[1] - encoder(b.xa[1]),
+            cmd.p[0] - encoder(b.xa[0], self.encoder),
+            cmd.p[1] - encoder(b.xa[1], self.encoder),
             cmd.v[0],
             cmd.v[1],
             cmd.a[0],
@@ -1202,7 +1211,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let dt = 1.0 / internal_rate;
 
     let chain = Chain::new(p);
-    let mut controller = Controller::new(p, &chain, internal_rate);
+    let mut controller = Controller::new(p, &chain, internal_rate, setup.encoder_resolution);
     let mut context = ContextLink {
         rate: setup.context_rate_hz,
         latency: p.context_latency,
@@ -1211,6 +1220,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         next_step: 0,
         in_flight: VecDeque::new(),
         received: [0.0; 6],
+        encoder: setup.encoder_resolution,
     };
     let mut sensors = SensorChain::new(
         &setup.sensors,
@@ -1583,7 +1593,7 @@ mod tests {
         p.friction_compensation = 0.5;
         p.force_limit = 3.0;
         let chain = Chain::new(&p);
-        let mut c = Controller::new(&p, &chain, 20_000.0);
+        let mut c = Controller::new(&p, &chain, 20_000.0, ENCODER_RESOLUTION);
         let mut tr = Trajectory::new(0.001, [0.02, 0.0]);
         tr.set_accel(0, [1.0, 0.0]);
         let b = Bodies {
@@ -1684,7 +1694,7 @@ mod tests {
         let mut p = Plant::nominal();
         p.control_rate = 1500.0;
         let chain = Chain::new(&p);
-        let mut c = Controller::new(&p, &chain, 20_000.0);
+        let mut c = Controller::new(&p, &chain, 20_000.0, ENCODER_RESOLUTION);
         let mut tr = Trajectory::new(0.001, [0.01, 0.0]);
         let b = skin_at([0.0; 2], [0.0; 2]);
         let mut ripple = DriveRipple {
@@ -1733,6 +1743,7 @@ mod tests {
             rate_hz,
             oversampling: (required / rate_hz).ceil().max(2.0) as usize,
             context_rate_hz: 1000.0,
+            encoder_resolution: ENCODER_RESOLUTION,
         };
         let mut noise = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
         let out = run(&mut setup, &mut noise);
@@ -1763,6 +1774,7 @@ mod tests {
             next_step: 0,
             in_flight: VecDeque::new(),
             received: [0.0; 6],
+            encoder: ENCODER_RESOLUTION,
         };
         let mut tr = Trajectory::new(0.001, [0.0; 2]);
         tr.set_accel(3, [2.0, 0.0]);

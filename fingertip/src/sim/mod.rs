@@ -126,7 +126,7 @@ pub const CHANNELS: [ChannelSpec; 10] = [
         name: "pos_err_x",
         unit: "m",
         adc: None,
-        doc: "tip position error from the controller: commanded minus encoder-measured position, x (1 um resolution)",
+        doc: "tip position error from the controller: commanded minus encoder-measured position, x (the encoders resolve 1 um unless a run sets otherwise)",
     },
     ChannelSpec {
         name: "pos_err_y",
@@ -165,6 +165,9 @@ pub const MAX_LEAD_IN_S: f64 = 10.0;
 
 /// The largest [`SimOptions::noise_factor`].
 pub const MAX_NOISE_FACTOR: f64 = 10.0;
+
+/// The finest and the coarsest [`SimOptions::encoder_resolution_um`] (µm).
+pub const ENCODER_RESOLUTION_RANGE_UM: (f64, f64) = (0.1, 100.0);
 
 /// Metadata key of the physical onset time in seconds (absent when nothing happened).
 pub const META_ONSET: &str = "onset_s";
@@ -660,6 +663,11 @@ pub struct SimOptions {
     /// fares on sensors noisier (or quieter) than any simulated. The trace records the
     /// noise scale in effect and this factor.
     pub noise_factor: f64,
+    /// The resolution of the tip position the controller reads from its joint encoders, in
+    /// µm (0.1 to 100; 1, the default, in every run of the envelope): its loops act on it and
+    /// its position error carries it. A coarser one shows how a detector fares on an arm
+    /// whose encoders are. The trace records it when it is not the default.
+    pub encoder_resolution_um: f64,
 }
 
 impl Default for SimOptions {
@@ -672,6 +680,7 @@ impl Default for SimOptions {
             duration_s: None,
             lead_in_s: 0.0,
             noise_factor: 1.0,
+            encoder_resolution_um: engine::ENCODER_RESOLUTION * 1e6,
         }
     }
 }
@@ -781,6 +790,14 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         MAX_NOISE_FACTOR,
         "0 to 10",
     )?;
+    let (finest, coarsest) = ENCODER_RESOLUTION_RANGE_UM;
+    check(
+        "encoder_resolution_um",
+        opts.encoder_resolution_um,
+        finest,
+        coarsest,
+        "0.1 to 100 um",
+    )?;
     Ok(())
 }
 
@@ -836,6 +853,7 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         rate_hz: opts.rate_hz,
         oversampling: n_over,
         context_rate_hz: opts.controller_rate_hz,
+        encoder_resolution: opts.encoder_resolution_um / 1e6,
     };
     let out = engine::run(&mut setup, &mut noise);
 
@@ -1240,6 +1258,12 @@ fn push_metadata(
     }
     if opts.noise_factor != 1.0 {
         trace.push_metadata("noise_factor", &fmt_f64(opts.noise_factor))?;
+    }
+    if opts.encoder_resolution_um / 1e6 != engine::ENCODER_RESOLUTION {
+        trace.push_metadata(
+            "encoder_resolution_um",
+            &fmt_f64(opts.encoder_resolution_um),
+        )?;
     }
     if let Some(s) = scheduled_onset {
         trace.push_metadata("scheduled_onset_s", &fmt_f64(s))?;
