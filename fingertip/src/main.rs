@@ -64,7 +64,7 @@ enum Command {
         noise_factor: f64,
         /// The resolution of the tip position the controller reads from its joint encoders
         /// (µm, 0.1 to 100; the envelope's is 1): a run on an arm whose encoders are coarser.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
         /// Output file; standard output when absent.
         #[arg(long)]
@@ -283,7 +283,7 @@ enum Command {
         /// The resolution of the tip position the controller reads from its joint encoders
         /// (µm, 0.1 to 100; the envelope's is 1): how the detectors fare on an arm whose
         /// encoders are coarser, its loops acting on them.
-        #[arg(long, default_value_t = 1.0)]
+        #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
         /// Also write the report as JSON here.
         #[arg(long)]
@@ -1820,7 +1820,7 @@ impl Tally {
             if self.noise_factor != 1.0 {
                 options += &format!(" --noise-factor {}", self.noise_factor);
             }
-            if self.encoder_um != 1.0 {
+            if self.encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
                 options += &format!(" --encoder-um {}", self.encoder_um);
             }
             println!(
@@ -2005,7 +2005,7 @@ fn evaluate(
     if noise_factor != 1.0 {
         conditions += &format!(", sensor noise {noise_factor} times the drawn");
     }
-    if encoder_um != 1.0 {
+    if encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
         conditions += &format!(", encoders resolving {encoder_um} um at the tip");
     }
     match tallies.as_slice() {

@@ -69,10 +69,6 @@ const GRAVITY: f64 = 9.81;
 /// Below this speed the drive's Coulomb friction is regularized (proportional to speed).
 const FRICTION_SPEED: f64 = 0.001;
 
-/// Resolution of the tip position the controller computes from its joint encoders, unless
-/// a run sets its own ([`super::SimOptions::encoder_resolution_um`]).
-pub(crate) const ENCODER_RESOLUTION: f64 = 1e-6;
-
 /// The fastest approach of any scenario (m/s), for bounding impact forces.
 const FASTEST_APPROACH: f64 = 0.1;
 
@@ -1389,6 +1385,9 @@ fn round_context(v: f64) -> f64 {
 mod tests {
     use super::*;
     use rand::SeedableRng;
+
+    /// The envelope's encoder resolution at the tip (m).
+    const ENCODER_RESOLUTION: f64 = crate::sim::DEFAULT_ENCODER_RESOLUTION_UM / 1e6;
 
     fn object(law: ContactLaw, tilt: f64, relaxation: Option<(f64, f64)>) -> ObjectSetup {
         ObjectSetup {

@@ -166,6 +166,10 @@ pub const MAX_LEAD_IN_S: f64 = 10.0;
 /// The largest [`SimOptions::noise_factor`].
 pub const MAX_NOISE_FACTOR: f64 = 10.0;
 
+/// The resolution of the tip position the controller reads from its joint encoders in
+/// every run of the envelope (µm), [`SimOptions::encoder_resolution_um`]'s default.
+pub const DEFAULT_ENCODER_RESOLUTION_UM: f64 = 1.0;
+
 /// The finest and the coarsest [`SimOptions::encoder_resolution_um`] (µm).
 pub const ENCODER_RESOLUTION_RANGE_UM: (f64, f64) = (0.1, 100.0);
 
@@ -680,7 +684,7 @@ impl Default for SimOptions {
             duration_s: None,
             lead_in_s: 0.0,
             noise_factor: 1.0,
-            encoder_resolution_um: engine::ENCODER_RESOLUTION * 1e6,
+            encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
         }
     }
 }
@@ -1259,7 +1263,7 @@ fn push_metadata(
     if opts.noise_factor != 1.0 {
         trace.push_metadata("noise_factor", &fmt_f64(opts.noise_factor))?;
     }
-    if opts.encoder_resolution_um / 1e6 != engine::ENCODER_RESOLUTION {
+    if opts.encoder_resolution_um != DEFAULT_ENCODER_RESOLUTION_UM {
         trace.push_metadata(
             "encoder_resolution_um",
             &fmt_f64(opts.encoder_resolution_um),
