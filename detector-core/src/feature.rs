@@ -41,6 +41,12 @@ pub enum StageSpec<N> {
         /// Source channel or feature.
         input: N,
     },
+    /// max(input, 0): the input where it is positive, else 0, e.g. a jerk towards the pad
+    /// only, the one sign that can make a film read a load.
+    Positive {
+        /// Source channel or feature.
+        input: N,
+    },
     /// First-order low-pass, backward-Euler discretization:
     /// y += α (x − y) with α = Δt / (τ + Δt), τ = 1 / (2π f_c). It warms up as the mean of
     /// what it has seen: the n-th sample weighs max(α, 1/n), so the output starts at the
@@ -255,6 +261,7 @@ impl<N> StageSpec<N> {
         Ok(match self {
             StageSpec::Raw { input } => StageSpec::Raw { input: f(input)? },
             StageSpec::Abs { input } => StageSpec::Abs { input: f(input)? },
+            StageSpec::Positive { input } => StageSpec::Positive { input: f(input)? },
             StageSpec::LowPass {
                 input,
                 cutoff_hz,
@@ -332,6 +339,7 @@ impl<N> StageSpec<N> {
         match self {
             StageSpec::Raw { .. } => "raw",
             StageSpec::Abs { .. } => "abs",
+            StageSpec::Positive { .. } => "positive",
             StageSpec::LowPass { .. } => "low_pass",
             StageSpec::Envelope { .. } => "envelope",
             StageSpec::HighPass { .. } => "high_pass",
@@ -449,6 +457,7 @@ pub struct Stage(StageKind);
 pub enum StageKind {
     Raw(u8),
     Abs(u8),
+    Positive(u8),
     /// `alpha` is α in Q31; `warm` the last sample the warm-up's mean counts: the
     /// configured limit or, sooner, where 1/n falls to α ([`mean_gain_samples`]); the
     /// warm-up also ends once slot `until` is above `until_above` (Q16.16; `i32::MAX`:
@@ -618,6 +627,7 @@ impl Stage {
             }
             StageKind::Raw(_)
             | StageKind::Abs(_)
+            | StageKind::Positive(_)
             | StageKind::Gate { .. }
             | StageKind::Rate { .. }
             | StageKind::Difference { .. }
@@ -643,6 +653,7 @@ impl Stage {
         Ok(Stage(match *spec {
             StageSpec::Raw { input } => StageKind::Raw(input),
             StageSpec::Abs { input } => StageKind::Abs(input),
+            StageSpec::Positive { input } => StageKind::Positive(input),
             StageSpec::LowPass {
                 input,
                 cutoff_hz,
@@ -757,6 +768,7 @@ impl Stage {
         match self.0 {
             StageKind::Raw(i) => get(i),
             StageKind::Abs(i) => get(i).saturating_abs(),
+            StageKind::Positive(i) => get(i).max(0),
             StageKind::LowPass {
                 input,
                 alpha,
@@ -976,6 +988,10 @@ impl Stage {
                 w.u8(StageTag::Abs as u8);
                 w.u8(i);
             }
+            StageKind::Positive(i) => {
+                w.u8(StageTag::Positive as u8);
+                w.u8(i);
+            }
             StageKind::LowPass {
                 input,
                 alpha,
@@ -1077,6 +1093,7 @@ impl Stage {
         let kind = match StageTag::from_byte(r.u8()?) {
             Some(StageTag::Raw) => StageKind::Raw(r.u8()?),
             Some(StageTag::Abs) => StageKind::Abs(r.u8()?),
+            Some(StageTag::Positive) => StageKind::Positive(r.u8()?),
             Some(StageTag::LowPass) => {
                 let (input, alpha) = (r.u8()?, r.u32()?);
                 StageKind::LowPass {
@@ -1165,6 +1182,7 @@ impl StageKind {
         let inputs_ok = match *self {
             StageKind::Raw(i)
             | StageKind::Abs(i)
+            | StageKind::Positive(i)
             | StageKind::Envelope { input: i, .. }
             | StageKind::HighPass { input: i, .. }
             | StageKind::Rate { input: i, .. }
@@ -1255,10 +1273,11 @@ enum StageTag {
     Mean = 10,
     Envelope = 11,
     Gate = 12,
+    Positive = 13,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 13] = [
+    const ALL: [StageTag; 14] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1272,6 +1291,7 @@ impl StageTag {
         StageTag::Mean,
         StageTag::Envelope,
         StageTag::Gate,
+        StageTag::Positive,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1286,6 +1306,7 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
         match self.0.0 {
             StageKind::Raw(i) => write!(f, "Raw({i})"),
             StageKind::Abs(i) => write!(f, "Abs({i})"),
+            StageKind::Positive(i) => write!(f, "Positive({i})"),
             StageKind::LowPass {
                 input,
                 alpha,
@@ -1916,6 +1937,10 @@ mod tests {
         assert_eq!(
             run(StageSpec::Abs { input: 0 }, &[&[-1.5, 2.0]]),
             vec![1.5, 2.0]
+        );
+        assert_eq!(
+            run(StageSpec::Positive { input: 0 }, &[&[-1.5, 2.0, 0.0]]),
+            vec![0.0, 2.0, 0.0]
         );
     }
 

@@ -183,6 +183,7 @@ impl std::error::Error for ModelError {}
 enum Stage {
     Raw(usize),
     Abs(usize),
+    Positive(usize),
     LowPass {
         input: usize,
         alpha: f64,
@@ -431,6 +432,7 @@ impl Model {
             stages.push(match resolved {
                 StageSpec::Raw { input } => Stage::Raw(input),
                 StageSpec::Abs { input } => Stage::Abs(input),
+                StageSpec::Positive { input } => Stage::Positive(input),
                 StageSpec::LowPass {
                     input,
                     cutoff_hz,
@@ -620,6 +622,7 @@ impl Model {
             let value = match stage {
                 Stage::Raw(i) => v(*i),
                 Stage::Abs(i) => v(*i).abs(),
+                Stage::Positive(i) => v(*i).max(0.0),
                 Stage::LowPass {
                     input,
                     alpha,

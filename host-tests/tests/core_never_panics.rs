@@ -109,6 +109,7 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
     prop_oneof![
         n().prop_map(|input| StageSpec::Raw { input }),
         n().prop_map(|input| StageSpec::Abs { input }),
+        n().prop_map(|input| StageSpec::Positive { input }),
         (
             n(),
             prop_oneof![1 => any_f32(), 12 => 0.1f32..4.9, 2 => 0.1f32..3000.0],
@@ -470,7 +471,7 @@ proptest! {
     /// build far more often, so `tick` sees many shapes of detector.
     #[test]
     fn plausible_configs_tick_without_panicking(
-        kinds in prop::collection::vec((0u8..13, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
+        kinds in prop::collection::vec((0u8..14, any::<[u8; 4]>(), 1u16..=128, 0.5f32..400.0), 1..=6),
         cdfs in prop::collection::vec((plausible_cdf(), any::<u8>(), 0.0f32..=0.25), 1..=8),
         masks in prop::collection::vec(any::<u8>(), 1..=3),
         ticks in prop::collection::vec(any_tick(), 1..=TICKS),
@@ -501,6 +502,7 @@ proptest! {
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
                 11 => StageSpec::Gate { input: p(0), unless: Crossing { feature: p(1), above: *cutoff - 200.0 } },
+                12 => StageSpec::Positive { input: p(0) },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };
             let n = format!("f{k}");

@@ -129,8 +129,8 @@ impl ChannelPlan {
 }
 
 /// A feature: its kind (0 raw, 1 abs, 2 low-pass, 3 rate, 4 difference, 5 dot,
-/// 6 magnitude, 7 rectangular STE, 8 triangular STE, 9 mean, 10 envelope, 11 gate), input
-/// picks and a parameter.
+/// 6 magnitude, 7 rectangular STE, 8 triangular STE, 9 mean, 10 envelope, 11 gate, 12 positive),
+/// input picks and a parameter.
 #[derive(Clone, Debug)]
 struct FeaturePlan {
     kind: u8,
@@ -207,7 +207,7 @@ fn plan() -> impl Strategy<Value = Plan> {
         prop::collection::vec(any::<i32>(), TICKS),
     )
         .prop_map(|(k, mode, words)| ChannelPlan { k, mode, words });
-    let feature = (0u8..12, any::<[u8; 4]>(), any::<u16>())
+    let feature = (0u8..13, any::<[u8; 4]>(), any::<u16>())
         .prop_map(|(kind, picks, param)| FeaturePlan { kind, picks, param });
     (
         rate,
@@ -257,6 +257,7 @@ fn stage_for(
     match p.kind {
         0 => (StageSpec::Raw { input: n(a) }, ia),
         1 => (StageSpec::Abs { input: n(a) }, ia),
+        12 => (StageSpec::Positive { input: n(a) }, ia),
         2 => {
             // Only inputs bounded below 16384 (see the module doc); channel 0 otherwise.
             let s = if ia.bound < 16384.0 { a } else { 0 };

@@ -98,6 +98,7 @@ fn samples(kmin: u32, kmax: u32, len: usize) -> impl Strategy<Value = Vec<[i32; 
 fn stage(kind: &str) -> StageSpec<String> {
     match kind {
         "abs" => StageSpec::Abs { input: name("x") },
+        "positive" => StageSpec::Positive { input: name("x") },
         "difference" => StageSpec::Difference {
             a: name("x"),
             b: name("y"),
@@ -125,14 +126,14 @@ fn stage(kind: &str) -> StageSpec<String> {
 proptest! {
     #![proptest_config(proptest_config(CASES, "proptest-regressions/reference_features.txt"))]
 
-    /// Raw, abs, difference, gate, and rate at an integer detector rate are exact,
+    /// Raw, abs, positive, difference, gate, and rate at an integer detector rate are exact,
     /// saturating at the `Signal` range, including the extremes of the input range.
     #[test]
     fn exact_stages_are_exact(
         rate in 10u32..=50_000,
         s in prop_oneof![samples(4, 31, 80), Just(vec![[i32::MIN, i32::MAX, 0, -1], [i32::MAX, i32::MIN, 1, 0], [i32::MIN; 4]])],
     ) {
-        let kinds = ["raw", "abs", "difference", "rate", "gate"];
+        let kinds = ["raw", "abs", "positive", "difference", "rate", "gate"];
         let c = features_config(rate as f32, kinds.iter().map(|k| (*k, stage(k))).collect());
         for (t, (got, want)) in run(&c, &s).iter().enumerate() {
             for (i, kind) in kinds.iter().enumerate() {

@@ -334,7 +334,9 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
             LSB + x * (1.0 / 1_048_576.0 + warm / 2_147_483_648.0)
         };
         let e = match &f.stage {
-            StageSpec::Raw { input } | StageSpec::Abs { input } => d(input),
+            StageSpec::Raw { input } | StageSpec::Abs { input } | StageSpec::Positive { input } => {
+                d(input)
+            }
             StageSpec::LowPass {
                 input, cutoff_hz, ..
             } => d(input) + low_pass(*cutoff_hz, m(input)),
