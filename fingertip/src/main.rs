@@ -66,6 +66,15 @@ enum Command {
         /// (µm, 0.1 to 100; the envelope's is 1): a run on an arm whose encoders are coarser.
         #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
+        /// With --randomize: draw a parameter from another range than the envelope's,
+        /// `group.name=min..max` as docs/simulator.md names it (e.g.
+        /// `plant.control_bandwidth=10..15`); may be repeated.
+        #[arg(
+            long = "range",
+            value_name = "GROUP.NAME=MIN..MAX",
+            requires = "randomize"
+        )]
+        ranges: Vec<sim::ParamRange>,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -257,7 +266,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "ranges"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -285,6 +294,12 @@ enum Command {
         /// encoders are coarser, its loops acting on them.
         #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
+        /// Draw a parameter from another range than the envelope's, `group.name=min..max`
+        /// as docs/simulator.md names it: how the detectors fare on one arm's range (e.g.
+        /// `plant.control_bandwidth=10..15`, the slow loops) or beyond the envelope; may be
+        /// repeated.
+        #[arg(long = "range", value_name = "GROUP.NAME=MIN..MAX")]
+        ranges: Vec<sim::ParamRange>,
         /// Also write the report as JSON here.
         #[arg(long)]
         json: Option<PathBuf>,
@@ -413,6 +428,7 @@ fn run(cli: Cli) -> Result<()> {
             lead_in_ms,
             noise_factor,
             encoder_um,
+            ranges,
             out,
         } => simulate(
             &scenario,
@@ -423,6 +439,7 @@ fn run(cli: Cli) -> Result<()> {
                 lead_in_s: lead_in_ms / 1000.0,
                 noise_factor,
                 encoder_resolution_um: encoder_um,
+                ranges,
                 ..SimOptions::default()
             },
             out.as_deref(),
@@ -557,6 +574,7 @@ fn run(cli: Cli) -> Result<()> {
             lead_in_ms,
             noise_factor,
             encoder_um,
+            ranges,
             json,
             plot_bins,
             ..
@@ -568,6 +586,7 @@ fn run(cli: Cli) -> Result<()> {
                 lead_in_ms,
                 noise_factor,
                 encoder_um,
+                ranges,
             },
             &config,
             (json.as_deref(), plot_bins.as_deref()),
@@ -1527,7 +1546,7 @@ const MAX_RUNS: usize = 100_000;
 const MAX_FREE_HOURS: f64 = 100.0;
 
 /// What `evaluate` simulates.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Plan {
     /// Randomized runs per single-event scenario.
     runs: usize,
@@ -1541,6 +1560,8 @@ struct Plan {
     noise_factor: f64,
     /// The encoders' resolution at the tip, µm ([`SimOptions::encoder_resolution_um`]).
     encoder_um: f64,
+    /// Parameters drawn from other ranges than the envelope's ([`SimOptions::ranges`]).
+    ranges: Vec<sim::ParamRange>,
 }
 
 /// One randomized run of `evaluate`.
@@ -1619,6 +1640,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         lead_in_s: plan.lead_in_ms / 1000.0,
         noise_factor: plan.noise_factor,
         encoder_resolution_um: plan.encoder_um,
+        ranges: plan.ranges.clone(),
         ..SimOptions::default()
     };
     let trace = sim::simulate(&scenario, &opts)?;
@@ -1705,9 +1727,11 @@ struct Tally {
     failures: Vec<(Scenario, u64, Outcome)>,
     /// The single-event runs' lead-in (ms), to reproduce them.
     lead_in_ms: f64,
-    /// The runs' noise factor and encoder resolution (µm), to reproduce them.
+    /// The runs' noise factor, encoder resolution (µm) and parameter ranges, to reproduce
+    /// them.
     noise_factor: f64,
     encoder_um: f64,
+    ranges: Vec<sim::ParamRange>,
 }
 
 impl Tally {
@@ -1762,6 +1786,7 @@ impl Tally {
             lead_in_ms: plan.lead_in_ms,
             noise_factor: plan.noise_factor,
             encoder_um: plan.encoder_um,
+            ranges: plan.ranges.clone(),
         }
     }
 
@@ -1822,6 +1847,9 @@ impl Tally {
             }
             if self.encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
                 options += &format!(" --encoder-um {}", self.encoder_um);
+            }
+            for r in &self.ranges {
+                options += &format!(" --range {r}");
             }
             println!(
                 "  {:<26} --seed {seed}{options}: {outcome}",
@@ -1947,6 +1975,7 @@ fn evaluate(
         lead_in_ms,
         noise_factor,
         encoder_um,
+        ref ranges,
     } = plan;
     let (detectors, names) = load_detectors(configs)?;
     let inputs: Vec<&Path> = configs.iter().map(PathBuf::as_path).collect();
@@ -1987,6 +2016,9 @@ fn evaluate(
             fingertip::readable(encoder_um)
         );
     }
+    for r in ranges {
+        r.check().map_err(|e| anyhow!("--range {e}"))?;
+    }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
     let (results, wall) = run_jobs(&detectors, &plan, free_runs)?;
     let tallies: Vec<(String, Tally)> = names
@@ -2007,6 +2039,9 @@ fn evaluate(
     }
     if encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
         conditions += &format!(", encoders resolving {encoder_um} um at the tip");
+    }
+    for r in ranges {
+        conditions += &format!(", {} drawn from {} .. {}", r.name, r.min, r.max);
     }
     match tallies.as_slice() {
         [(name, tally)] => {
@@ -2032,6 +2067,10 @@ fn evaluate(
             "lead_in_ms": lead_in_ms,
             "noise_factor": noise_factor,
             "encoder_um": encoder_um,
+            "ranges": ranges
+                .iter()
+                .map(|r| serde_json::json!({ "parameter": r.name, "min": r.min, "max": r.max }))
+                .collect::<Vec<_>>(),
             "simulated_s_per_wall_s": speed,
         });
         // One detector: its fields at the top level; several: a list of them.

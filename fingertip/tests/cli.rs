@@ -643,6 +643,10 @@ fn evaluate_bounds_its_counts() {
         (["--noise-factor", "11"], "--noise-factor = 11"),
         (["--encoder-um", "0.01"], "--encoder-um = 0.01"),
         (["--encoder-um=200", "--runs=1"], "--encoder-um = 200"),
+        (
+            ["--range", "plant.arm_mass=1..50"],
+            "--range plant.arm_mass=1..50: the bounds must stay",
+        ),
     ] {
         let mut all = vec!["evaluate"];
         all.extend(args);
@@ -698,10 +702,10 @@ fn evaluate_gives_runs_a_lead_in() {
     );
 }
 
-/// `--noise-factor` scales every sensor's white noise and `--encoder-um` sets the
-/// encoders' resolution in every run: the report says so, its JSON carries them, and each
-/// failure line reproduces its run with them (after the free-motion run's length), the
-/// trace `simulate` writes then recording them.
+/// `--noise-factor` scales every sensor's white noise, `--encoder-um` sets the encoders'
+/// resolution and `--range` a parameter's range in every run: the report says so, its
+/// JSON carries them, and each failure line reproduces its run with them (after the
+/// free-motion run's length), the trace `simulate` writes then recording them.
 #[test]
 fn evaluate_runs_beyond_the_envelope() {
     let dir = scratch("beyond");
@@ -716,6 +720,10 @@ fn evaluate_runs_beyond_the_envelope() {
         "3",
         "--encoder-um",
         "5",
+        "--range",
+        "plant.control_bandwidth=10..12",
+        "--range",
+        "plant.arm_mass=0.6..0.7",
         "--config",
         concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/paper.toml"),
         "--json",
@@ -724,16 +732,38 @@ fn evaluate_runs_beyond_the_envelope() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stdout = text(&out.stdout);
     assert!(
-        stdout.contains("sensor noise 3 times the drawn, encoders resolving 5 um at the tip"),
+        stdout.contains("sensor noise 3 times the drawn, encoders resolving 5 um at the tip, plant.control_bandwidth drawn from 10 .. 12, plant.arm_mass drawn from 0.6 .. 0.7"),
         "{stdout}"
     );
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
     assert_eq!(report["noise_factor"], 3.0);
     assert_eq!(report["encoder_um"], 5.0);
+    assert_eq!(report["ranges"][0]["parameter"], "plant.control_bandwidth");
+    assert_eq!(report["ranges"][1]["min"], 0.6);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
     let (line, csv) = rerun_first_failure(&stdout, &dir);
-    assert!(line.contains(" --noise-factor 3 --encoder-um 5:"), "{line}");
+    assert!(
+        line.contains(" --noise-factor 3 --encoder-um 5 --range plant.control_bandwidth=10..12 --range plant.arm_mass=0.6..0.7:"),
+        "{line}"
+    );
+    assert!(
+        csv.contains("# range.plant.control_bandwidth: 10..12\n"),
+        "{}",
+        &csv[..600]
+    );
+    let drawn = |name: &str| -> f64 {
+        let key = format!("# param.{name}: ");
+        let at = csv.find(&key).expect("the parameter") + key.len();
+        csv[at..]
+            .lines()
+            .next()
+            .expect("a value")
+            .parse()
+            .expect("a number")
+    };
+    assert!((10.0..=12.0).contains(&drawn("plant.control_bandwidth")));
+    assert!((0.6..=0.7).contains(&drawn("plant.arm_mass")));
     assert!(csv.contains("# noise_factor: 3\n"), "{}", &csv[..400]);
     assert!(
         csv.contains("# encoder_resolution_um: 5\n"),

@@ -1,7 +1,7 @@
 //! Sampling: the anti-alias filter before decimation, the detector rate as a parameter,
 //! the channels' full scales, and bad options.
 
-use fingertip::sim::{self, CHANNELS, Scenario, SimError, SimOptions};
+use fingertip::sim::{self, CHANNELS, ParamRange, Scenario, SimError, SimOptions};
 use std::f64::consts::TAU;
 
 fn tone(freq: f64, rate: f64, n: usize) -> Vec<f64> {
@@ -210,4 +210,176 @@ fn duration_option_sets_the_length() {
     )
     .unwrap();
     assert!(tr.truth_onset().is_none());
+}
+
+/// A range that cannot be drawn from is refused with the reason, before any work: an
+/// unknown parameter, bounds out of order or not finite, a sign the parameter cannot take,
+/// bounds beyond ten times the envelope's, or a range on a run that draws nothing.
+#[test]
+fn bad_ranges_are_errors_not_panics() {
+    let range = |name: &str, min: f64, max: f64| ParamRange {
+        name: name.to_string(),
+        min,
+        max,
+    };
+    for (r, randomize, reason) in [
+        (
+            range("plant.bogus", 1.0, 2.0),
+            true,
+            "not a simulator parameter",
+        ),
+        (
+            range("arm_mass", 0.3, 0.4),
+            true,
+            "not a simulator parameter",
+        ),
+        (range("plant.arm_mass", 0.4, 0.3), true, "min <= max"),
+        (range("plant.arm_mass", f64::NAN, 0.3), true, "finite"),
+        (range("plant.arm_mass", 0.0, 0.3), true, "above 0"),
+        (range("plant.drive_ripple", -0.01, 0.05), true, "0 or more"),
+        (range("plant.pad_angle", -0.1, 0.5), true, "above 0"),
+        (range("plant.arm_mass", 0.3, 5.1), true, "within +-5"),
+        (
+            range("plant.feedforward_error", -1.6, 0.0),
+            true,
+            "within +-1.5",
+        ),
+        (range("plant.arm_mass", 0.3, 0.4), false, "draws none"),
+    ] {
+        let opts = SimOptions {
+            randomize,
+            ranges: vec![r.clone()],
+            ..SimOptions::default()
+        };
+        let e = sim::simulate(&Scenario::ContactHard8, &opts).unwrap_err();
+        assert!(matches!(e, SimError::BadRange(_)), "{r}: {e}");
+        let text = e.to_string();
+        assert!(text.contains(reason), "{r}: {text}");
+        assert!(!text.contains('\n'));
+    }
+}
+
+/// A range replaces the envelope's for the parameter it names, every other draw staying as
+/// it was, and the trace records it; a free-motion parameter's range reaches its
+/// trajectory.
+#[test]
+fn ranges_replace_the_envelope() {
+    let run = |scenario: Scenario, ranges: Vec<ParamRange>| {
+        sim::simulate(
+            &scenario,
+            &SimOptions {
+                seed: 7,
+                randomize: true,
+                duration_s: (scenario == Scenario::FreeMotion).then_some(2.0),
+                ranges,
+                ..SimOptions::default()
+            },
+        )
+        .expect("simulate")
+    };
+    let value = |t: &fingertip::trace::Trace, name: &str| -> f64 {
+        t.meta(&format!("param.{name}"))
+            .expect("recorded")
+            .parse()
+            .expect("a number")
+    };
+    let envelope = run(Scenario::LinkCollision8, vec![]);
+    let slow = run(
+        Scenario::LinkCollision8,
+        vec![ParamRange {
+            name: "plant.control_bandwidth".into(),
+            min: 5.0,
+            max: 6.0,
+        }],
+    );
+    let bw = value(&slow, "plant.control_bandwidth");
+    assert!((5.0..=6.0).contains(&bw), "{bw}");
+    assert!(value(&envelope, "plant.control_bandwidth") >= 10.0);
+    assert_eq!(slow.meta("range.plant.control_bandwidth"), Some("5..6"));
+    assert_eq!(envelope.meta("range.plant.control_bandwidth"), None);
+    // The other parameters are drawn as before.
+    for name in [
+        "plant.arm_mass",
+        "plant.control_damping_ratio",
+        "obstacle.stiffness",
+    ] {
+        assert_eq!(value(&slow, name), value(&envelope, name), "{name}");
+    }
+    // Pinned to one value, a free-motion stretch cruises no faster than it.
+    let pinned = run(
+        Scenario::FreeMotion,
+        vec![
+            ParamRange {
+                name: "free_motion.cruise_speed".into(),
+                min: 0.01,
+                max: 0.01,
+            },
+            ParamRange {
+                name: "free_motion.speed".into(),
+                min: 0.01,
+                max: 0.01,
+            },
+        ],
+    );
+    let vx = pinned.column("vel_des_x").expect("vel_des_x");
+    let vy = pinned.column("vel_des_y").expect("vel_des_y");
+    let fastest = vx
+        .iter()
+        .zip(vy)
+        .map(|(x, y)| x.hypot(*y))
+        .fold(0.0, f64::max);
+    assert!(fastest > 0.005 && fastest < 0.0101, "{fastest}");
+}
+
+/// Every parameter drawn at the ends of what a range may reach (from a tenth of its
+/// envelope's lower bound, or 0, up to it; from its upper bound to ten times it) gives a
+/// trace whose channels are finite: no panic, no NaN.
+#[test]
+fn every_parameter_at_the_ends_of_its_reach_runs() {
+    for p in sim::params::all_specs() {
+        let name = format!("{}.{}", p.group, p.name);
+        let scenario = match p.group {
+            "soft_object" => Scenario::ContactSoft5,
+            "firm_soft_object" | "braking" => Scenario::ContactBraking,
+            "very_soft_object" => Scenario::ContactVerySoft1,
+            "movable_object" => Scenario::ObjectMoves5,
+            "obstacle" => Scenario::LinkCollision8,
+            "large_disturbance" => Scenario::DisturbanceLarge5,
+            "small_disturbance" => Scenario::DisturbanceSmall5,
+            "knock" => Scenario::KnockLink1,
+            "sudden_accel" => Scenario::SuddenAccelMoving5,
+            "free_motion" => Scenario::FreeMotion,
+            _ => Scenario::ContactHard5,
+        };
+        let reach = sim::params::RANGE_REACH * p.min.abs().max(p.max.abs());
+        let low = if p.min > 0.0 {
+            p.min / sim::params::RANGE_REACH
+        } else if p.min >= 0.0 || p.draw == sim::params::Draw::EitherSign {
+            0.0
+        } else {
+            -reach
+        };
+        for (min, max) in [(low, p.min), (p.max, reach)] {
+            let r = ParamRange {
+                name: name.clone(),
+                min,
+                max,
+            };
+            let t = sim::simulate(
+                &scenario,
+                &SimOptions {
+                    seed: 3,
+                    randomize: true,
+                    duration_s: (scenario == Scenario::FreeMotion).then_some(1.0),
+                    ranges: vec![r.clone()],
+                    ..SimOptions::default()
+                },
+            )
+            .unwrap_or_else(|e| panic!("{r}: {e}"));
+            for c in CHANNELS {
+                let col = t.column(c.name).expect("channel");
+                assert!(col.iter().all(|v| v.is_finite()), "{r}: {}", c.name);
+            }
+        }
+    }
 }

@@ -28,8 +28,8 @@ use engine::{
     Setup, Struck,
 };
 use params::{
-    Braking, FirmSoftObject, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle,
-    Plant, Sensors, SmallDisturbance, SoftObject, SuddenAccel, Surface, VerySoftObject,
+    Braking, Draws, FirmSoftObject, HardObject, Knock, LargeDisturbance, Motion, MovableObject,
+    Obstacle, Plant, Sensors, SmallDisturbance, SoftObject, SuddenAccel, Surface, VerySoftObject,
 };
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -38,6 +38,7 @@ use std::str::FromStr;
 use trajectory::Trajectory;
 
 pub use filters::{ANTI_ALIAS_CUTOFF_RATIO, AntiAliasFilter, decimate};
+pub use params::ParamRange;
 
 /// The event name of a fingertip contact.
 pub const CONTACT: &str = "contact";
@@ -672,6 +673,22 @@ pub struct SimOptions {
     /// its position error carries it. A coarser one shows how a detector fares on an arm
     /// whose encoders are. The trace records it when it is not the default.
     pub encoder_resolution_um: f64,
+    /// Parameters a randomized run draws from another range than the envelope's (the
+    /// last one given for a parameter counts): how a detector fares on one arm's, sensor's
+    /// or object's range, or beyond the envelope. Each is recorded in the trace as
+    /// `range.GROUP.NAME`; a non-randomized run refuses them.
+    pub ranges: Vec<ParamRange>,
+}
+
+impl SimOptions {
+    /// How the run chooses its parameters.
+    fn draws(&self) -> Draws<'_> {
+        if self.randomize {
+            Draws::Randomized(&self.ranges)
+        } else {
+            Draws::Nominal
+        }
+    }
 }
 
 impl Default for SimOptions {
@@ -685,6 +702,7 @@ impl Default for SimOptions {
             lead_in_s: 0.0,
             noise_factor: 1.0,
             encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
+            ranges: Vec::new(),
         }
     }
 }
@@ -703,6 +721,9 @@ pub enum SimError {
         /// The allowed range.
         reason: &'static str,
     },
+    /// A parameter's range cannot be drawn from, or was given for a run that draws none.
+    #[error("simulation option `ranges`: {0}")]
+    BadRange(String),
     /// The trace could not be built (a bug: the simulator's output is always valid).
     #[error(transparent)]
     Trace(#[from] TraceError),
@@ -802,6 +823,14 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         coarsest,
         "0.1 to 100 um",
     )?;
+    if let Some(r) = opts.ranges.first().filter(|_| !opts.randomize) {
+        return Err(SimError::BadRange(format!(
+            "{r}: a run with the nominal parameters draws none"
+        )));
+    }
+    for r in &opts.ranges {
+        r.check().map_err(SimError::BadRange)?;
+    }
     Ok(())
 }
 
@@ -817,7 +846,7 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     let mut prng = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 0));
     let mut noise = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 1));
     let mut traj_rng = Xoshiro256PlusPlus::seed_from_u64(stream_seed(opts.seed, name, 2));
-    let r = opts.randomize;
+    let r = opts.draws();
     let plant = Plant::choose(&mut prng, r);
     let mut sensors = Sensors::choose(&mut prng, r);
     sensors.noise_scale *= opts.noise_factor;
@@ -910,7 +939,7 @@ fn free_motion_scene(opts: &SimOptions, traj_rng: &mut Xoshiro256PlusPlus) -> Sc
     let d = opts.duration_s.unwrap_or(FREE_MOTION_S);
     let ticks = (d * opts.controller_rate_hz).ceil() as u64 + 1;
     Scene {
-        trajectory: Trajectory::free_motion(period, ticks, traj_rng),
+        trajectory: Trajectory::free_motion(period, ticks, traj_rng, &opts.ranges),
         object: None,
         obstacle: None,
         disturbance: None,
@@ -930,7 +959,7 @@ fn approach_scene(
     values: &mut Vec<(String, f64)>,
     meta: &mut Vec<(String, String)>,
 ) -> Scene {
-    let r = opts.randomize;
+    let r = opts.draws();
     let period = 1.0 / opts.controller_rate_hz;
     let motion = Motion::choose(prng, r);
     values.extend(motion.values());
@@ -955,7 +984,7 @@ fn approach_scene(
         Kind::Collision => {
             let o = Obstacle::choose(prng, r);
             values.extend(o.values());
-            let body = if r && prng.random::<f64>() < 0.5 {
+            let body = if r.random() && prng.random::<f64>() < 0.5 {
                 Struck::Link2
             } else {
                 Struck::Link1
@@ -992,7 +1021,7 @@ fn approach_scene(
             scene.trajectory.set_accel(start, decel);
             scene.trajectory.set_accel(start + stop_ticks, [0.0; 2]);
             let reach = scene.trajectory.at(contact).p;
-            let hard = !r || prng.random::<f64>() < 0.5;
+            let hard = !r.random() || prng.random::<f64>() < 0.5;
             let object = if hard {
                 ObjectKind::Hard
             } else {
@@ -1011,7 +1040,7 @@ fn approach_scene(
             let large = match size {
                 Size::Large => true,
                 Size::Small => false,
-                Size::Either => !r || prng.random::<f64>() < 0.5,
+                Size::Either => !r.random() || prng.random::<f64>() < 0.5,
             };
             if matches!(size, Size::Either) {
                 let name = if large { "large" } else { "small" };
@@ -1024,7 +1053,7 @@ fn approach_scene(
             let k = Knock::choose(prng, r);
             values.extend(k.values());
             // Nominal: a tap against the approach. Randomized: tap or burst, +x or -x.
-            let burst = r && prng.random::<f64>() < 0.5;
+            let burst = r.random() && prng.random::<f64>() < 0.5;
             let direction = random_direction(prng, r) + k.direction_offset;
             let kind = if burst {
                 DisturbanceKind::Vibration {
@@ -1086,7 +1115,7 @@ fn contact_object(
     kind: ObjectKind,
     reach: [f64; 2],
     prng: &mut Xoshiro256PlusPlus,
-    r: bool,
+    r: Draws<'_>,
     values: &mut Vec<(String, f64)>,
 ) -> ObjectSetup {
     let surface = Surface::choose(prng, r);
@@ -1150,7 +1179,7 @@ fn disturbance_setup(
     large: bool,
     onset: f64,
     prng: &mut Xoshiro256PlusPlus,
-    r: bool,
+    r: Draws<'_>,
     values: &mut Vec<(String, f64)>,
     meta: &mut Vec<(String, String)>,
 ) -> DisturbanceSetup {
@@ -1180,9 +1209,9 @@ fn disturbance_setup(
     };
     // Nominal: a vibration against the approach (-x) on link 2. Randomized: tap or
     // vibration, towards +x or -x, on the tip, link 2 or link 1, each equally likely.
-    let impulse = r && prng.random::<f64>() < 0.5;
+    let impulse = r.random() && prng.random::<f64>() < 0.5;
     let base = random_direction(prng, r);
-    let body = if r {
+    let body = if r.random() {
         [Struck::Tip, Struck::Link2, Struck::Link1][prng.random_range(0..3usize)]
     } else {
         Struck::Link2
@@ -1224,8 +1253,8 @@ fn push_disturbance_meta(
 
 /// A disturbance's base direction: against the approach (-x, angle pi) in nominal runs,
 /// +x or -x equally likely in randomized ones.
-fn random_direction(prng: &mut Xoshiro256PlusPlus, r: bool) -> f64 {
-    if r && prng.random::<f64>() < 0.5 {
+fn random_direction(prng: &mut Xoshiro256PlusPlus, r: Draws<'_>) -> f64 {
+    if r.random() && prng.random::<f64>() < 0.5 {
         0.0
     } else {
         std::f64::consts::PI
@@ -1267,6 +1296,12 @@ fn push_metadata(
         trace.push_metadata(
             "encoder_resolution_um",
             &fmt_f64(opts.encoder_resolution_um),
+        )?;
+    }
+    for r in &opts.ranges {
+        trace.push_metadata(
+            &format!("range.{}", r.name),
+            &format!("{}..{}", fmt_f64(r.min), fmt_f64(r.max)),
         )?;
     }
     if let Some(s) = scheduled_onset {

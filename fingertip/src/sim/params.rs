@@ -84,6 +84,132 @@ pub(crate) fn log_uniform<R: Rng>(rng: &mut R, lo: f64, hi: f64) -> f64 {
     uniform(rng, lo.ln(), hi.ln()).exp().clamp(lo, hi)
 }
 
+/// A parameter drawn from another range than the envelope's: `group.name=min..max` on the
+/// command line, e.g. `plant.control_bandwidth=10..15` for the slow loops of one arm, or a
+/// range beyond the envelope to see where a detector stops holding.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamRange {
+    /// The parameter, `group.name` as in [`all_specs`] and the trace's `param.` metadata.
+    pub name: String,
+    /// The smallest value drawn (with [`Draw::EitherSign`], the smallest magnitude).
+    pub min: f64,
+    /// The largest.
+    pub max: f64,
+}
+
+impl std::str::FromStr for ParamRange {
+    type Err = String;
+
+    /// `group.name=min..max`; the name and the values are checked by [`ParamRange::check`].
+    fn from_str(s: &str) -> Result<ParamRange, String> {
+        let syntax = || format!("`{s}` is not of the form group.name=min..max");
+        let (name, range) = s.split_once('=').ok_or_else(syntax)?;
+        let (min, max) = range.split_once("..").ok_or_else(syntax)?;
+        let value = |v: &str| {
+            v.trim()
+                .parse::<f64>()
+                .map_err(|_| format!("`{v}` in `{s}` is not a number"))
+        };
+        Ok(ParamRange {
+            name: name.trim().to_string(),
+            min: value(min)?,
+            max: value(max)?,
+        })
+    }
+}
+
+impl std::fmt::Display for ParamRange {
+    /// As [`ParamRange`]'s `FromStr` reads it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}={}..{}", self.name, self.min, self.max)
+    }
+}
+
+/// How far beyond the envelope a [`ParamRange`] may reach: a factor on the larger of the
+/// envelope's bounds' magnitudes.
+pub const RANGE_REACH: f64 = 10.0;
+
+impl ParamRange {
+    /// Why this range cannot be drawn from, if it cannot: an unknown parameter, bounds not
+    /// finite or in the wrong order, a sign the parameter cannot take (a mass, a
+    /// stiffness or a rate drawn from a positive envelope stays positive; one that may be
+    /// 0 stays at or above 0; a magnitude drawn with either sign stays at or above 0), or
+    /// bounds more than [`RANGE_REACH`] times the envelope's larger one.
+    pub fn check(&self) -> Result<(), String> {
+        let spec = all_specs()
+            .into_iter()
+            .find(|p| format!("{}.{}", p.group, p.name) == self.name)
+            .ok_or_else(|| {
+                format!(
+                    "`{}` is not a simulator parameter (docs/simulator.md lists them)",
+                    self.name
+                )
+            })?;
+        let (lo, hi) = (self.min, self.max);
+        if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
+            return Err(format!(
+                "{self}: the bounds must be finite numbers, min <= max"
+            ));
+        }
+        let reach = RANGE_REACH * spec.min.abs().max(spec.max.abs());
+        if lo < -reach || hi > reach {
+            return Err(format!(
+                "{self}: the bounds must stay within +-{reach} ({RANGE_REACH} times the envelope's {} .. {})",
+                spec.min, spec.max
+            ));
+        }
+        let positive = spec.min > 0.0 || spec.draw == Draw::Log;
+        let non_negative = spec.min >= 0.0 || spec.draw == Draw::EitherSign;
+        if positive && lo <= 0.0 {
+            return Err(format!(
+                "{self}: this parameter is above 0 (the envelope's {} .. {})",
+                spec.min, spec.max
+            ));
+        }
+        if non_negative && lo < 0.0 {
+            return Err(format!(
+                "{self}: this parameter is 0 or more (the envelope's {} .. {})",
+                spec.min, spec.max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The range `ranges` gives parameter `group.name`, else the envelope's.
+pub(crate) fn range_of(
+    ranges: &[ParamRange],
+    group: &str,
+    name: &str,
+    envelope: (f64, f64),
+) -> (f64, f64) {
+    ranges
+        .iter()
+        .rev()
+        .find(|r| {
+            r.name
+                .split_once('.')
+                .is_some_and(|(g, n)| g == group && n == name)
+        })
+        .map_or(envelope, |r| (r.min, r.max))
+}
+
+/// How a run chooses its parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Draws<'a> {
+    /// The nominal values.
+    Nominal,
+    /// Drawn from their ranges: the envelope's, or those given here.
+    Randomized(&'a [ParamRange]),
+}
+
+impl Draws<'_> {
+    /// Whether the run is randomized.
+    pub fn random(self) -> bool {
+        matches!(self, Draws::Randomized(_))
+    }
+}
+
 macro_rules! param_group {
     (@draw) => { Draw::Uniform };
     (@draw log) => { Draw::Log };
@@ -123,12 +249,24 @@ macro_rules! param_group {
             /// Every parameter drawn from its range as marked ([`Draw`]), in declaration
             /// order.
             pub fn draw<R: Rng>(rng: &mut R) -> Self {
-                Self { $( $field: param_group!(@draw $($scale)?).from(rng, $lo, $hi), )+ }
+                Self::draw_within(rng, &[])
             }
 
-            /// Nominal values, or drawn ones when `randomize` is set.
-            pub fn choose<R: Rng>(rng: &mut R, randomize: bool) -> Self {
-                if randomize { Self::draw(rng) } else { Self::nominal() }
+            /// Every parameter drawn as [`Self::draw`] draws it, those named in `ranges`
+            /// from the range given there instead of the envelope's.
+            pub fn draw_within<R: Rng>(rng: &mut R, ranges: &[ParamRange]) -> Self {
+                Self { $( $field: {
+                    let (lo, hi) = range_of(ranges, $group, stringify!($field), ($lo, $hi));
+                    param_group!(@draw $($scale)?).from(rng, lo, hi)
+                }, )+ }
+            }
+
+            /// Nominal values, or drawn ones.
+            pub fn choose<R: Rng>(rng: &mut R, draws: Draws<'_>) -> Self {
+                match draws {
+                    Draws::Nominal => Self::nominal(),
+                    Draws::Randomized(ranges) => Self::draw_within(rng, ranges),
+                }
             }
 
             /// `(group.name, value)` of every parameter, in declaration order.

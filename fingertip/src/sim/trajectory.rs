@@ -4,7 +4,7 @@
 //! acceleration falls on a tick, and the context the fingertip receives (desired velocity
 //! and acceleration) is exactly what the controller applies.
 
-use super::params::{FreeMotion, log_uniform, uniform};
+use super::params::{FreeMotion, ParamRange, log_uniform, range_of, uniform};
 use rand::{Rng, RngExt};
 use std::f64::consts::{PI, TAU};
 
@@ -115,13 +115,19 @@ impl Trajectory {
     /// new speed and direction, then cruising). The motion stays near the start point:
     /// a move that would leave the workspace radius heads back towards the start instead,
     /// and so does every velocity change made more than a quarter of that radius away. It
-    /// ends at rest.
-    pub(crate) fn free_motion<R: Rng>(period: f64, ticks: u64, rng: &mut R) -> Trajectory {
+    /// ends at rest. Those of `ranges` that name a `free_motion` parameter replace its
+    /// range.
+    pub(crate) fn free_motion<R: Rng>(
+        period: f64,
+        ticks: u64,
+        rng: &mut R,
+        ranges: &[ParamRange],
+    ) -> Trajectory {
         let spec = |name: &str| {
             FreeMotion::SPECS
                 .iter()
                 .find(|s| s.name == name)
-                .map(|s| (s.min, s.max))
+                .map(|s| range_of(ranges, s.group, s.name, (s.min, s.max)))
                 .unwrap_or((0.0, 0.0))
         };
         let (pause_p, _) = spec("pause_probability");
@@ -267,7 +273,7 @@ mod tests {
     fn free_motion_stops_and_stays_near_start() {
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
         let ticks = 60_000;
-        let mut tr = Trajectory::free_motion(0.001, ticks, &mut rng);
+        let mut tr = Trajectory::free_motion(0.001, ticks, &mut rng, &[]);
         let mut max_r: f64 = 0.0;
         let mut max_v: f64 = 0.0;
         let mut moving = 0;
