@@ -1564,6 +1564,24 @@ struct Plan {
     ranges: Vec<sim::ParamRange>,
 }
 
+impl Plan {
+    /// The `simulate` options every run of the plan shares beyond the envelope's defaults
+    /// (the lead-in and a free-motion run's length aside), as a failure line gives them.
+    fn run_flags(&self) -> String {
+        let mut flags = String::new();
+        if self.noise_factor != 1.0 {
+            flags += &format!(" --noise-factor {}", self.noise_factor);
+        }
+        if self.encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
+            flags += &format!(" --encoder-um {}", self.encoder_um);
+        }
+        for r in &self.ranges {
+            flags += &format!(" --range {r}");
+        }
+        flags
+    }
+}
+
 /// One randomized run of `evaluate`.
 #[derive(Clone, Copy, Debug)]
 enum Job {
@@ -1727,11 +1745,8 @@ struct Tally {
     failures: Vec<(Scenario, u64, Outcome)>,
     /// The single-event runs' lead-in (ms), to reproduce them.
     lead_in_ms: f64,
-    /// The runs' noise factor, encoder resolution (µm) and parameter ranges, to reproduce
-    /// them.
-    noise_factor: f64,
-    encoder_um: f64,
-    ranges: Vec<sim::ParamRange>,
+    /// The options every run shares, to reproduce them ([`Plan::run_flags`]).
+    run_flags: String,
 }
 
 impl Tally {
@@ -1784,9 +1799,7 @@ impl Tally {
             free_hours: free_seconds / 3600.0,
             failures,
             lead_in_ms: plan.lead_in_ms,
-            noise_factor: plan.noise_factor,
-            encoder_um: plan.encoder_um,
-            ranges: plan.ranges.clone(),
+            run_flags: plan.run_flags(),
         }
     }
 
@@ -1835,25 +1848,17 @@ impl Tally {
                 continue;
             }
             // What `simulate` needs besides the seed to draw the same run.
-            let mut options = if *scenario == Scenario::FreeMotion {
+            let length = if *scenario == Scenario::FreeMotion {
                 format!(" --duration {FREE_RUN_S}")
             } else if self.lead_in_ms > 0.0 {
                 format!(" --lead-in-ms {}", self.lead_in_ms)
             } else {
                 String::new()
             };
-            if self.noise_factor != 1.0 {
-                options += &format!(" --noise-factor {}", self.noise_factor);
-            }
-            if self.encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
-                options += &format!(" --encoder-um {}", self.encoder_um);
-            }
-            for r in &self.ranges {
-                options += &format!(" --range {r}");
-            }
             println!(
-                "  {:<26} --seed {seed}{options}: {outcome}",
-                scenario.name()
+                "  {:<26} --seed {seed}{length}{}: {outcome}",
+                scenario.name(),
+                self.run_flags
             );
         }
     }

@@ -138,7 +138,7 @@ impl ParamRange {
     pub fn check(&self) -> Result<(), String> {
         let spec = all_specs()
             .into_iter()
-            .find(|p| format!("{}.{}", p.group, p.name) == self.name)
+            .find(|p| self.names(p.group, p.name))
             .ok_or_else(|| {
                 format!(
                     "`{}` is not a simulator parameter (docs/simulator.md lists them)",
@@ -174,6 +174,11 @@ impl ParamRange {
         }
         Ok(())
     }
+
+    /// Whether this range is parameter `group.name`'s.
+    fn names(&self, group: &str, name: &str) -> bool {
+        self.name.split_once('.') == Some((group, name))
+    }
 }
 
 /// The range `ranges` gives parameter `group.name`, else the envelope's.
@@ -186,11 +191,7 @@ pub(crate) fn range_of(
     ranges
         .iter()
         .rev()
-        .find(|r| {
-            r.name
-                .split_once('.')
-                .is_some_and(|(g, n)| g == group && n == name)
-        })
+        .find(|r| r.names(group, name))
         .map_or(envelope, |r| (r.min, r.max))
 }
 
