@@ -79,6 +79,16 @@ pub enum StageSpec<N> {
             serde(default, skip_serializing_if = "Option::is_none")
         )]
         warm_up_until: Option<Crossing<N>>,
+        /// Carries the warm-up's plain mean on to a longer limit when, as `warm_up_ms`
+        /// ends, another feature is above a level: a usual level learnt over one period of
+        /// the mains hum while the finger moved steadily, over two when a change of its
+        /// commanded motion has just set the skin ringing, whose reading a mean of one
+        /// period keeps. Needs `warm_up_ms`, which its own must exceed.
+        #[cfg_attr(
+            feature = "serde",
+            serde(default, skip_serializing_if = "Option::is_none")
+        )]
+        warm_up_longer: Option<LongerWarmUp<N>>,
     },
     /// The input's envelope: up with the input at once, down as the
     /// [`StageSpec::LowPass`] at `cutoff_hz` (y = x when x ≥ y, else y += α (x − y)):
@@ -202,6 +212,20 @@ pub struct Crossing<N> {
     pub above: f32,
 }
 
+/// A low-pass's longer warm-up (see [`StageSpec::LowPass`]'s `warm_up_longer`): taken when
+/// a feature is above a level as the shorter one ends.
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+pub struct LongerWarmUp<N> {
+    /// The channel or earlier feature watched.
+    pub feature: N,
+    /// The level, in the watched feature's unit; below 32768 in magnitude.
+    pub above: f32,
+    /// The longer warm-up (ms), above the stage's `warm_up_ms`.
+    pub warm_up_ms: f32,
+}
+
 #[cfg(feature = "serde")]
 fn default_window() -> Window {
     Window::Rectangular
@@ -267,6 +291,7 @@ impl<N> StageSpec<N> {
                 cutoff_hz,
                 warm_up_ms,
                 warm_up_until,
+                warm_up_longer,
             } => StageSpec::LowPass {
                 input: f(input)?,
                 cutoff_hz: *cutoff_hz,
@@ -275,6 +300,14 @@ impl<N> StageSpec<N> {
                     Some(l) => Some(Crossing {
                         feature: f(&l.feature)?,
                         above: l.above,
+                    }),
+                    None => None,
+                },
+                warm_up_longer: match warm_up_longer {
+                    Some(l) => Some(LongerWarmUp {
+                        feature: f(&l.feature)?,
+                        above: l.above,
+                        warm_up_ms: l.warm_up_ms,
                     }),
                     None => None,
                 },
@@ -381,6 +414,14 @@ pub enum StageError {
         /// The longest the detector rate allows, in ms.
         max_ms: f32,
     },
+    /// A low-pass's longer warm-up is not longer than its warm-up, or it has no warm-up to
+    /// carry on.
+    WarmUpLonger {
+        /// The warm-up in ms (NaN when absent).
+        warm_up_ms: f32,
+        /// The longer warm-up in ms.
+        longer_ms: f32,
+    },
     /// A level a low-pass's warm-up or a gate watches is not finite or not below 32768 in
     /// magnitude.
     Level {
@@ -413,6 +454,13 @@ impl core::fmt::Display for StageError {
             StageError::WarmUp { warm_up_ms, max_ms } => write!(
                 f,
                 "warm_up_ms = {warm_up_ms} must be above 0 and at most {max_ms} ms (65,534 samples at the detector rate)"
+            ),
+            StageError::WarmUpLonger {
+                warm_up_ms,
+                longer_ms,
+            } => write!(
+                f,
+                "warm_up_longer's warm_up_ms = {longer_ms} must exceed the stage's own warm_up_ms ({warm_up_ms}), which it needs"
             ),
             StageError::Level { above } => write!(
                 f,
@@ -461,13 +509,18 @@ pub enum StageKind {
     /// `alpha` is α in Q31; `warm` the last sample the warm-up's mean counts: the
     /// configured limit or, sooner, where 1/n falls to α ([`mean_gain_samples`]); the
     /// warm-up also ends once slot `until` is above `until_above` (Q16.16; `i32::MAX`:
-    /// never, `until` then the input).
+    /// never, `until` then the input). It goes on to `longer` (likewise limited) if slot
+    /// `watch` is above `watch_above` as the `warm`-th sample's tick has passed; `longer`
+    /// equals `warm` without a longer warm-up.
     LowPass {
         input: u8,
         alpha: u32,
         warm: u16,
         until: u8,
         until_above: i32,
+        longer: u16,
+        watch: u8,
+        watch_above: i32,
     },
     /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`].
     Envelope {
@@ -659,18 +712,45 @@ impl Stage {
                 cutoff_hz,
                 warm_up_ms,
                 ref warm_up_until,
+                ref warm_up_longer,
             } => {
                 let (until, until_above) = match *warm_up_until {
                     Some(Crossing { feature, above }) => (feature, level_q16(above)?),
                     None => (input, i32::MAX),
                 };
                 let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
+                let warm = warm_up_samples(rate_hz, warm_up_ms)?.min(mean_gain_samples(alpha));
+                let (longer, watch, watch_above) = match *warm_up_longer {
+                    Some(LongerWarmUp {
+                        feature,
+                        above,
+                        warm_up_ms: longer_ms,
+                    }) => {
+                        // Compared in samples, as the tick counts them.
+                        let longer = warm_up_samples(rate_hz, Some(longer_ms))?;
+                        if warm_up_ms.is_none() || longer <= warm_up_samples(rate_hz, warm_up_ms)? {
+                            return Err(StageError::WarmUpLonger {
+                                warm_up_ms: warm_up_ms.unwrap_or(f32::NAN),
+                                longer_ms,
+                            });
+                        }
+                        (
+                            longer.min(mean_gain_samples(alpha)),
+                            feature,
+                            level_q16(above)?,
+                        )
+                    }
+                    None => (warm, input, i32::MAX),
+                };
                 StageKind::LowPass {
                     input,
                     alpha,
-                    warm: warm_up_samples(rate_hz, warm_up_ms)?.min(mean_gain_samples(alpha)),
+                    warm,
                     until,
                     until_above,
+                    longer,
+                    watch,
+                    watch_above,
                 }
             }
             StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
@@ -775,14 +855,23 @@ impl Stage {
                 warm,
                 until,
                 until_above,
+                longer,
+                watch,
+                watch_above,
             } => {
                 // Ends only a warm-up still running. The level comes first: without a watched
                 // slot it is i32::MAX, and generated code drops the test. The first sample
                 // primes the filter whatever `pos` says.
-                if get(until) > until_above && st.pos < warm {
+                if get(until) > until_above && st.pos < longer {
                     st.pos = WARM_LIMIT;
                 }
-                low_pass(st, get(input), alpha, warm)
+                // Once the shorter warm-up's samples are in, it ends there unless its watched
+                // slot is above the level; past it, `pos` never equals `warm` again. Without a
+                // longer warm-up `longer` is `warm`, and generated code drops the test.
+                if longer > warm && st.pos == warm && get(watch) <= watch_above {
+                    st.pos = WARM_LIMIT;
+                }
+                low_pass(st, get(input), alpha, longer)
             }
             StageKind::Envelope { input, alpha } => {
                 let x = get(input);
@@ -998,13 +1087,27 @@ impl Stage {
                 warm,
                 until,
                 until_above,
+                longer,
+                watch,
+                watch_above,
             } => {
-                w.u8(StageTag::LowPass as u8);
+                // Without a longer warm-up, the encoding images had before there was one.
+                let tag = if longer > warm {
+                    StageTag::LowPassLonger
+                } else {
+                    StageTag::LowPass
+                };
+                w.u8(tag as u8);
                 w.u8(input);
                 w.u32(alpha);
                 w.u16(warm);
                 w.u8(until);
                 w.u32(until_above as u32);
+                if longer > warm {
+                    w.u16(longer);
+                    w.u8(watch);
+                    w.u32(watch_above as u32);
+                }
             }
             StageKind::HighPass { input, alpha, .. } => {
                 w.u8(StageTag::HighPass as u8);
@@ -1094,14 +1197,25 @@ impl Stage {
             Some(StageTag::Raw) => StageKind::Raw(r.u8()?),
             Some(StageTag::Abs) => StageKind::Abs(r.u8()?),
             Some(StageTag::Positive) => StageKind::Positive(r.u8()?),
-            Some(StageTag::LowPass) => {
+            Some(tag @ (StageTag::LowPass | StageTag::LowPassLonger)) => {
                 let (input, alpha) = (r.u8()?, r.u32()?);
+                let warm = r.u16()?.min(mean_gain_samples(alpha));
+                let (until, until_above) = (r.u8()?, r.u32()? as i32);
+                let (longer, watch, watch_above) = if matches!(tag, StageTag::LowPassLonger) {
+                    let longer = r.u16()?.min(mean_gain_samples(alpha));
+                    (longer, r.u8()?, r.u32()? as i32)
+                } else {
+                    (warm, input, i32::MAX)
+                };
                 StageKind::LowPass {
                     input,
                     alpha,
-                    warm: r.u16()?.min(mean_gain_samples(alpha)),
-                    until: r.u8()?,
-                    until_above: r.u32()? as i32,
+                    warm,
+                    until,
+                    until_above,
+                    longer,
+                    watch,
+                    watch_above,
                 }
             }
             Some(StageTag::HighPass) => {
@@ -1193,14 +1307,17 @@ impl StageKind {
             | StageKind::Gate {
                 input: a, watch: b, ..
             }
-            | StageKind::LowPass {
-                input: a, until: b, ..
-            }
             | StageKind::Cancel {
                 input: a,
                 motion: b,
                 ..
             } => (a as usize) < slots && (b as usize) < slots,
+            StageKind::LowPass {
+                input: a,
+                until: b,
+                watch: c,
+                ..
+            } => (a as usize) < slots && (b as usize) < slots && (c as usize) < slots,
             StageKind::Dot([a, b, c, d]) => {
                 (a as usize) < slots
                     && (b as usize) < slots
@@ -1220,7 +1337,9 @@ impl StageKind {
             {
                 Some("low-pass coefficient")
             }
-            StageKind::LowPass { warm: 0, .. } => Some("low-pass warm-up"),
+            StageKind::LowPass { warm, longer, .. } if warm == 0 || longer < warm => {
+                Some("low-pass warm-up")
+            }
             StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
             StageKind::Difference { gain, .. } if gain == i32::MIN => Some("difference gain"),
             StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
@@ -1274,10 +1393,11 @@ enum StageTag {
     Envelope = 11,
     Gate = 12,
     Positive = 13,
+    LowPassLonger = 14,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 14] = [
+    const ALL: [StageTag; 15] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1292,6 +1412,7 @@ impl StageTag {
         StageTag::Envelope,
         StageTag::Gate,
         StageTag::Positive,
+        StageTag::LowPassLonger,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1313,10 +1434,13 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                 warm,
                 until,
                 until_above,
+                longer,
+                watch,
+                watch_above,
             } => {
                 write!(
                     f,
-                    "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm}, until: {until}, until_above: {until_above} }}"
+                    "LowPass {{ input: {input}, alpha: {alpha}, warm: {warm}, until: {until}, until_above: {until_above}, longer: {longer}, watch: {watch}, watch_above: {watch_above} }}"
                 )
             }
             StageKind::HighPass { input, alpha, warm } => {
@@ -1687,6 +1811,7 @@ mod tests {
                 cutoff_hz: 50.0,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             },
             &[&x],
         );
@@ -1700,6 +1825,7 @@ mod tests {
                 cutoff_hz: 50.0,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             },
             &[&step],
         );
@@ -1757,6 +1883,7 @@ mod tests {
             cutoff_hz: 1.0,
             warm_up_ms,
             warm_up_until: None,
+            warm_up_longer: None,
         };
         let mut x = vec![0.0; 10];
         x.extend([100.0; 30]);
@@ -1790,6 +1917,7 @@ mod tests {
                 feature: 1,
                 above: 0.5,
             }),
+            warm_up_longer: None,
         };
         let mut x = vec![0.0; 10];
         x.extend([100.0; 30]);
@@ -1811,6 +1939,52 @@ mod tests {
         // Above it from the first sample: the first sample still sets the output.
         let at_once = run(spec, &[&[3.0; 2], &[1.0; 2]]);
         assert_eq!(at_once[0], 3.0);
+    }
+
+    /// A longer warm-up is taken on what its watched feature reads on the tick after the
+    /// shorter one's last sample, and on that tick only: 2 samples, or 4 when the watched
+    /// input is above its level then (exactly the level is not above it), whatever it reads
+    /// before or after. The longer mean is ended early by `warm_up_until` as the shorter
+    /// one is.
+    #[test]
+    fn low_pass_warm_up_goes_on_when_its_watched_feature_is_above() {
+        // 1 Hz at 1 kHz: α = 0.0062, below 1/n for the first 160 samples.
+        let spec = |until| StageSpec::LowPass {
+            input: 0,
+            cutoff_hz: 1.0,
+            warm_up_ms: Some(2.0),
+            warm_up_until: until,
+            warm_up_longer: Some(LongerWarmUp {
+                feature: 1,
+                above: 0.5,
+                warm_up_ms: 4.0,
+            }),
+        };
+        let alpha = 1.0 / (1.0 + 1000.0 / (2.0 * std::f64::consts::PI));
+        let x = [1.0, 3.0, 5.0, 7.0, 9.0];
+        let short = [1.0, 2.0, 2.0 + 3.0 * alpha, 0.0, 0.0];
+        let long = [1.0, 2.0, 3.0, 4.0, 4.0 + 5.0 * alpha];
+        let close = |got: &[f64], want: &[f64], n: usize| {
+            for k in 0..n {
+                assert!((got[k] - want[k]).abs() < 1e-3, "tick {k}: {got:?}");
+            }
+        };
+        for (watched, want, n) in [
+            ([0.0; 5], &short, 3),
+            ([1.0, 1.0, 0.5, 1.0, 1.0], &short, 3),
+            ([0.0, 0.0, 0.6, 0.0, 0.0], &long, 5),
+            ([1.0; 5], &long, 5),
+        ] {
+            close(&run(spec(None), &[&x, &watched]), want, n);
+        }
+        // Ended early while carried on: from the fourth sample the filter forgets at α.
+        let until = Some(Crossing {
+            feature: 2,
+            above: 0.5,
+        });
+        let ends = [0.0, 0.0, 0.0, 1.0, 0.0];
+        let got = run(spec(until), &[&x, &[1.0; 5], &ends]);
+        close(&got, &[1.0, 2.0, 3.0, 3.0 + 4.0 * alpha], 4);
     }
 
     /// The gain taken apart into its whole part and its fraction scales exactly as the
@@ -2008,6 +2182,7 @@ mod tests {
                 cutoff_hz: 600.0,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             }),
             Err(StageError::Cutoff {
                 cutoff_hz: 600.0,
@@ -2020,6 +2195,7 @@ mod tests {
                 cutoff_hz: f32::NAN,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             })
             .is_err()
         );
@@ -2031,6 +2207,7 @@ mod tests {
                     cutoff_hz: 1.0,
                     warm_up_ms: Some(warm_up_ms),
                     warm_up_until: None,
+                    warm_up_longer: None,
                 })
                 .map_err(|e| matches!(e, StageError::WarmUp { max_ms, .. } if max_ms == 65_534.0)),
                 Err(true),
@@ -2044,6 +2221,7 @@ mod tests {
                     cutoff_hz: 1.0,
                     warm_up_ms: None,
                     warm_up_until: Some(Crossing { feature: 1, above }),
+                    warm_up_longer: None,
                 })
                 .map_err(|e| matches!(e, StageError::Level { .. })),
                 Err(true),
@@ -2056,6 +2234,7 @@ mod tests {
                 cutoff_hz: 1.0,
                 warm_up_ms: Some(65_534.0),
                 warm_up_until: None,
+                warm_up_longer: None,
             })
             .is_ok()
         );

@@ -191,6 +191,9 @@ enum Stage {
         warm: u32,
         /// The warm-up ends once this slot is above the level.
         until: Option<(usize, f64)>,
+        /// The warm-up goes on to this many samples if this slot is above the level once
+        /// `warm` samples are in.
+        longer: Option<(usize, f64, u32)>,
     },
     HighPass {
         input: usize,
@@ -287,6 +290,8 @@ struct StageState {
     history: Vec<f64>,
     /// Samples the low-pass has seen.
     seen: u32,
+    /// The low-pass's warm-up goes on to its longer limit.
+    longer: bool,
 }
 
 /// The most samples a low-pass warms up over.
@@ -438,17 +443,26 @@ impl Model {
                     cutoff_hz,
                     warm_up_ms,
                     warm_up_until,
-                } => Stage::LowPass {
-                    input,
-                    alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                    warm_up_longer,
+                } => {
                     // Rounded as the configuration's f32 values are (the sample count is
                     // part of the stage's definition).
-                    warm: warm_up_ms.map_or(WARM_LIMIT, |ms| {
+                    let samples = |ms: f32| {
                         ((ms * config.rate_hz / 1000.0 + 0.5) as u32).clamp(1, WARM_LIMIT - 1)
-                    }),
-                    // The level as the core holds it (16.16).
-                    until: warm_up_until.map(|l| (l.feature, Signal::from_f32(l.above).to_f64())),
-                },
+                    };
+                    Stage::LowPass {
+                        input,
+                        alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
+                        warm: warm_up_ms.map_or(WARM_LIMIT, samples),
+                        // The levels as the core holds them (16.16).
+                        until: warm_up_until
+                            .map(|l| (l.feature, Signal::from_f32(l.above).to_f64())),
+                        longer: warm_up_longer.map(|l| {
+                            let above = Signal::from_f32(l.above).to_f64();
+                            (l.feature, above, samples(l.warm_up_ms))
+                        }),
+                    }
+                }
                 StageSpec::HighPass { input, cutoff_hz } => Stage::HighPass {
                     input,
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
@@ -628,6 +642,7 @@ impl Model {
                     alpha,
                     warm,
                     until,
+                    longer,
                 } => {
                     if let Some((u, above)) = until
                         && st.seen > 0
@@ -635,7 +650,16 @@ impl Model {
                     {
                         st.seen = u32::MAX;
                     }
-                    st.low_pass(v(*input), *alpha, *warm)
+                    if let Some((w, above, _)) = longer
+                        && st.seen == *warm
+                    {
+                        st.longer = v(*w) > *above;
+                    }
+                    let limit = match longer {
+                        Some((_, _, n)) if st.longer => *n,
+                        _ => *warm,
+                    };
+                    st.low_pass(v(*input), *alpha, limit)
                 }
                 Stage::HighPass { input, alpha } => {
                     let x = v(*input);

@@ -8,7 +8,7 @@ mod support;
 
 use detector_build::LoadError;
 use detector_build::{Config, ConfigError, Item, Problem, Warning};
-use detector_core::{CdfError, CdfSpec, Crossing, StageError, StageSpec, Window};
+use detector_core::{CdfError, CdfSpec, Crossing, LongerWarmUp, StageError, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -184,6 +184,7 @@ fn nan_anywhere() {
                 cutoff_hz: nan,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             }
         },
         &["feature 'fa'", "cutoff_hz = NaN"],
@@ -196,6 +197,7 @@ fn nan_anywhere() {
                 cutoff_hz: 1.0,
                 warm_up_ms: Some(nan),
                 warm_up_until: None,
+                warm_up_longer: None,
             }
         },
         &["feature 'fa'", "warm_up_ms = NaN"],
@@ -234,6 +236,7 @@ fn infinity_anywhere() {
                 cutoff_hz: inf,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             }
         },
         &["feature 'fb'", "cutoff_hz = inf"],
@@ -274,6 +277,18 @@ fn an_unknown_channel() {
             feature: name(feature),
             above,
         }),
+        warm_up_longer: None,
+    };
+    let longer = |feature: &str, above: f32| StageSpec::LowPass {
+        input: name("a"),
+        cutoff_hz: 1.0,
+        warm_up_ms: Some(20.0),
+        warm_up_until: None,
+        warm_up_longer: Some(LongerWarmUp {
+            feature: name(feature),
+            above,
+            warm_up_ms: 40.0,
+        }),
     };
     let gate = |feature: &str, above: f32| StageSpec::Gate {
         input: name("a"),
@@ -282,7 +297,7 @@ fn an_unknown_channel() {
             above,
         },
     };
-    let watchers: [fn(&str, f32) -> StageSpec<String>; 2] = [until, gate];
+    let watchers: [fn(&str, f32) -> StageSpec<String>; 3] = [until, longer, gate];
     for watcher in watchers {
         let e = reject(
             |c| c.features[0].stage = watcher("fb", 1.0),
@@ -304,6 +319,50 @@ fn an_unknown_channel() {
         config.features[0].stage = watcher("b", -1.0);
         assert!(detector_build::build(&config).is_ok());
     }
+}
+
+/// A longer warm-up carries a warm-up on: it needs one, longer than that one in samples
+/// (at the configuration's 1 kHz, 2.4 ms is the same 2 samples as 2 ms), and a warm-up of
+/// its own the counter holds.
+#[test]
+fn a_longer_warm_up_must_carry_a_shorter_one_on() {
+    let stage = |warm_up_ms: Option<f32>, longer_ms: f32| StageSpec::LowPass {
+        input: name("a"),
+        cutoff_hz: 1.0,
+        warm_up_ms,
+        warm_up_until: None,
+        warm_up_longer: Some(LongerWarmUp {
+            feature: name("b"),
+            above: 1.0,
+            warm_up_ms: longer_ms,
+        }),
+    };
+    for (shorter, longer, words) in [
+        (None, 40.0, &["warm_up_ms = 40", "(NaN)"][..]),
+        (Some(20.0), 20.0, &["warm_up_ms = 20", "(20)"][..]),
+        (Some(20.0), 10.0, &["warm_up_ms = 10", "(20)"][..]),
+        (Some(2.0), 2.4, &["warm_up_ms = 2.4", "(2)"][..]),
+    ] {
+        let e = reject(|c| c.features[0].stage = stage(shorter, longer), words);
+        assert_eq!(e.item, Item::Feature(name("fa")));
+        assert!(
+            matches!(e.problem, Problem::Stage(StageError::WarmUpLonger { .. })),
+            "{e:?}"
+        );
+    }
+    for longer in [f32::NAN, -1.0, 1e9] {
+        let e = reject(
+            |c| c.features[0].stage = stage(Some(20.0), longer),
+            &["feature 'fa'", "warm_up_ms = "],
+        );
+        assert!(
+            matches!(e.problem, Problem::Stage(StageError::WarmUp { .. })),
+            "{e:?}"
+        );
+    }
+    let mut config = good();
+    config.features[0].stage = stage(Some(20.0), 40.0);
+    assert!(detector_build::build(&config).is_ok());
 }
 
 #[test]
@@ -493,6 +552,7 @@ fn other_rules() {
                 cutoff_hz: 500.0,
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             }
         },
         &["cutoff_hz = 500", "500 Hz"],

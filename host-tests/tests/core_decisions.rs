@@ -393,6 +393,7 @@ fn faults_follow_feature_chains() {
                     cutoff_hz: 100.0,
                     warm_up_ms: None,
                     warm_up_until: None,
+                    warm_up_longer: None,
                 },
             ),
             ("fx", raw("x")),

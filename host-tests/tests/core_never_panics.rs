@@ -27,7 +27,9 @@ mod support;
 use detector_build::{
     ChannelSpec, Config, ContextTerm, EventSpec, FeatureSpec, LevelSpec, PhaseSpec, SensorTerm,
 };
-use detector_core::{Cdf, CdfSpec, Crossing, Detector, EventId, Signal, StageSpec, Window};
+use detector_core::{
+    Cdf, CdfSpec, Crossing, Detector, EventId, LongerWarmUp, Signal, StageSpec, Window,
+};
 use proptest::prelude::*;
 use support::*;
 
@@ -115,13 +117,25 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
             prop_oneof![1 => any_f32(), 12 => 0.1f32..4.9, 2 => 0.1f32..3000.0],
             prop::option::of(prop_oneof![1 => any_f32(), 6 => 0.1f32..200.0]),
             prop::option::of((n(), any_f32())),
+            prop::option::of((
+                n(),
+                any_f32(),
+                prop_oneof![1 => any_f32(), 6 => 0.1f32..400.0]
+            )),
         )
-            .prop_map(|(input, cutoff_hz, warm_up_ms, until)| StageSpec::LowPass {
-                input,
-                cutoff_hz,
-                warm_up_ms,
-                warm_up_until: until.map(|(feature, above)| Crossing { feature, above }),
-            }),
+            .prop_map(
+                |(input, cutoff_hz, warm_up_ms, until, longer)| StageSpec::LowPass {
+                    input,
+                    cutoff_hz,
+                    warm_up_ms,
+                    warm_up_until: until.map(|(feature, above)| Crossing { feature, above }),
+                    warm_up_longer: longer.map(|(feature, above, warm_up_ms)| LongerWarmUp {
+                        feature,
+                        above,
+                        warm_up_ms,
+                    }),
+                },
+            ),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
@@ -491,6 +505,11 @@ proptest! {
                     warm_up_until: k.is_multiple_of(3).then(|| Crossing {
                         feature: p(1),
                         above: *cutoff - 200.0,
+                    }),
+                    warm_up_longer: k.is_multiple_of(4).then(|| LongerWarmUp {
+                        feature: p(2),
+                        above: 200.0 - *cutoff,
+                        warm_up_ms: 10.0,
                     }),
                 },
                 3 => StageSpec::Rate { input: p(0) },

@@ -67,7 +67,7 @@ mod support;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use detector_build::{Config, EventSpec};
-use detector_core::{CdfSpec, Crossing, Signal, StageSpec, Window};
+use detector_core::{CdfSpec, Crossing, LongerWarmUp, Signal, StageSpec, Window};
 use host_tests::reference::{Model, cdf};
 use proptest::prelude::*;
 use support::*;
@@ -263,15 +263,16 @@ fn stage_for(
             let s = if ia.bound < 16384.0 { a } else { 0 };
             let f = 0.001 + 0.449 * f32::from(p.param) / 65535.0;
             let cutoff_hz = rate_hz * f;
+            let warm_up_ms = p
+                .param
+                .is_multiple_of(3)
+                .then(|| 1.0 + f32::from(p.param % 97));
             (
                 StageSpec::LowPass {
                     input: n(s),
                     cutoff_hz,
                     // A third with a warm-up of 1-97 ms.
-                    warm_up_ms: p
-                        .param
-                        .is_multiple_of(3)
-                        .then(|| 1.0 + f32::from(p.param % 97)),
+                    warm_up_ms,
                     // Half end their warm-up early when an exact slot (the same value in
                     // both models) rises above a level within its usual range.
                     warm_up_until: (p.param.is_multiple_of(2) && info[pick(1)].exact).then(|| {
@@ -280,6 +281,15 @@ fn stage_for(
                             above: f32::from(p.picks[2]) - 128.0,
                         }
                     }),
+                    // Of those with a warm-up, most carry it on by 1-50 ms when another
+                    // exact slot is above a level within its usual range.
+                    warm_up_longer: warm_up_ms
+                        .filter(|_| !p.param.is_multiple_of(5) && info[pick(3)].exact)
+                        .map(|ms| LongerWarmUp {
+                            feature: n(pick(3)),
+                            above: f32::from(p.picks[1]) - 128.0,
+                            warm_up_ms: ms + 1.0 + f32::from(p.param % 50),
+                        }),
                 },
                 SlotInfo {
                     bound: info[s].bound,

@@ -35,7 +35,7 @@
 mod support;
 
 use detector_build::Config;
-use detector_core::{Crossing, Signal, StageSpec, Window};
+use detector_core::{Crossing, LongerWarmUp, Signal, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -191,7 +191,8 @@ proptest! {
             cutoff_hz,
             warm_up_ms: None,
             warm_up_until: None,
-        };
+        warm_up_longer: None,
+    };
         let cutoffs = [rate * fraction, rate * 0.45];
         let c = features_config(rate, vec![("lp", lp(cutoffs[0])), ("lp2", lp(cutoffs[1]))]);
         let mut max_x: f64 = 0.0;
@@ -202,6 +203,43 @@ proptest! {
                 prop_assert!((got[i] - want[i]).abs() <= bound,
                     "feature {} tick {}: engine {} model {} bound {:e}", i, t, got[i], want[i], bound);
             }
+        }
+    }
+
+    /// A warm-up carried on to a longer one while a channel reads above a level as the
+    /// shorter ends (and ended early by another): within the low-pass's bound, the two
+    /// models taking the same turns on the same exact channels.
+    #[test]
+    fn low_pass_with_a_longer_warm_up_within_bound(
+        fraction in prop_oneof![0.0001f32..=0.01, 0.01f32..=0.45],
+        warm_ms in 1u8..=30,
+        more_ms in 1u8..=30,
+        above in -3.0f32..3.0,
+        ends in prop::option::of(-3.0f32..3.0),
+        s in samples(4, 18, 120),
+    ) {
+        let rate = 1000.0;
+        let cutoff_hz = rate * fraction;
+        let c = features_config(rate, vec![(
+            "lp",
+            StageSpec::LowPass {
+                input: name("x"),
+                cutoff_hz,
+                warm_up_ms: Some(f32::from(warm_ms)),
+                warm_up_until: ends.map(|above| Crossing { feature: name("z"), above }),
+                warm_up_longer: Some(LongerWarmUp {
+                    feature: name("y"),
+                    above,
+                    warm_up_ms: f32::from(warm_ms) + f32::from(more_ms),
+                }),
+            },
+        )]);
+        let mut max_x: f64 = 0.0;
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            max_x = max_x.max(Signal::from_bits(row[0]).to_f64().abs());
+            let bound = low_pass_bound(rate, cutoff_hz, max_x);
+            prop_assert!((got[0] - want[0]).abs() <= bound,
+                "tick {}: engine {} model {} bound {:e}", t, got[0], want[0], bound);
         }
     }
 
@@ -287,7 +325,8 @@ proptest! {
                     cutoff_hz,
                     warm_up_ms: None,
                     warm_up_until: None,
-                },
+                warm_up_longer: None,
+            },
             ),
             ("diff", StageSpec::Difference { a: name("x"), b: name("lp"), gain: 1.0 }),
         ]);
@@ -328,7 +367,8 @@ proptest! {
                     cutoff_hz,
                     warm_up_ms: Some(30.0),
                     warm_up_until: None,
-                },
+                warm_up_longer: None,
+            },
             ),
             ("zero", cancel("x", 0.0)),
         ]);
@@ -424,6 +464,7 @@ fn low_pass_by_hand() {
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             },
         )],
     );
@@ -497,6 +538,7 @@ fn low_pass_and_mean_warm_up_as_the_mean_so_far() {
                     cutoff_hz: 1.0,
                     warm_up_ms: None,
                     warm_up_until: None,
+                    warm_up_longer: None,
                 },
             ),
             (
@@ -567,6 +609,7 @@ fn low_pass_follows_a_step_across_the_range() {
                 cutoff_hz: rate / (2.0 * std::f32::consts::PI),
                 warm_up_ms: None,
                 warm_up_until: None,
+                warm_up_longer: None,
             },
         )],
     );
