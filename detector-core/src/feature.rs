@@ -734,11 +734,15 @@ impl Stage {
                                 longer_ms,
                             });
                         }
-                        (
-                            longer.min(mean_gain_samples(alpha)),
-                            feature,
-                            level_q16(above)?,
-                        )
+                        let (longer, above) =
+                            (longer.min(mean_gain_samples(alpha)), level_q16(above)?);
+                        // Where the filter's own weight ends the mean before the shorter
+                        // warm-up would, there is nothing to carry on.
+                        if longer > warm {
+                            (longer, feature, above)
+                        } else {
+                            (warm, input, i32::MAX)
+                        }
                     }
                     None => (warm, input, i32::MAX),
                 };
@@ -1337,7 +1341,18 @@ impl StageKind {
             {
                 Some("low-pass coefficient")
             }
-            StageKind::LowPass { warm, longer, .. } if warm == 0 || longer < warm => {
+            // Without a longer warm-up, `longer` is `warm` and nothing is watched.
+            StageKind::LowPass {
+                input,
+                warm,
+                longer,
+                watch,
+                watch_above,
+                ..
+            } if warm == 0
+                || longer < warm
+                || (longer == warm && (watch != input || watch_above != i32::MAX)) =>
+            {
                 Some("low-pass warm-up")
             }
             StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
@@ -1976,6 +1991,49 @@ mod tests {
             ([1.0; 5], &long, 5),
         ] {
             close(&run(spec(None), &[&x, &watched]), want, n);
+        }
+        // Where the filter's own weight ends the mean first (α = 1/3 at 1 kHz: after 2
+        // samples), there is nothing to carry on: the stage is the one without it.
+        let fast = |longer| StageSpec::LowPass {
+            input: 0,
+            cutoff_hz: 1000.0 / (4.0 * std::f32::consts::PI),
+            warm_up_ms: Some(5.0),
+            warm_up_until: None,
+            warm_up_longer: longer,
+        };
+        let compile = |spec| {
+            let mut weights = [0u32; WINDOW_POOL];
+            Stage::compile(&spec, 1000.0, &mut 0, &mut weights).expect("valid stage")
+        };
+        let watched = LongerWarmUp {
+            feature: 1,
+            above: 0.5,
+            warm_up_ms: 10.0,
+        };
+        assert_eq!(compile(fast(Some(watched))), compile(fast(None)));
+        // Nor does a loaded image say otherwise: a stage that carries nothing on watches
+        // nothing.
+        let StageKind::LowPass { warm, .. } = compile(fast(None)).0 else {
+            unreachable!()
+        };
+        for (longer, watch, watch_above) in
+            [(warm - 1, 0, i32::MAX), (warm, 1, i32::MAX), (warm, 0, 5)]
+        {
+            let kind = StageKind::LowPass {
+                input: 0,
+                alpha: 1 << 29,
+                warm,
+                until: 0,
+                until_above: i32::MAX,
+                longer,
+                watch,
+                watch_above,
+            };
+            assert_eq!(
+                kind.invalid(MAX_SLOTS),
+                Some("low-pass warm-up"),
+                "{kind:?}"
+            );
         }
         // Ended early while carried on: from the fourth sample the filter forgets at α.
         let until = Some(Crossing {
