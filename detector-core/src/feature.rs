@@ -719,32 +719,33 @@ impl Stage {
                     None => (input, i32::MAX),
                 };
                 let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
-                let warm = warm_up_samples(rate_hz, warm_up_ms)?.min(mean_gain_samples(alpha));
-                let (longer, watch, watch_above) = match *warm_up_longer {
+                let shorter = warm_up_samples(rate_hz, warm_up_ms)?;
+                let warm = shorter.min(mean_gain_samples(alpha));
+                let carried = match *warm_up_longer {
                     Some(LongerWarmUp {
                         feature,
                         above,
                         warm_up_ms: longer_ms,
                     }) => {
-                        // Compared in samples, as the tick counts them.
+                        // Compared in samples, as the tick counts them; without a warm-up of
+                        // its own the stage's is the counter's limit, which none exceeds.
                         let longer = warm_up_samples(rate_hz, Some(longer_ms))?;
-                        if warm_up_ms.is_none() || longer <= warm_up_samples(rate_hz, warm_up_ms)? {
+                        if longer <= shorter {
                             return Err(StageError::WarmUpLonger {
                                 warm_up_ms: warm_up_ms.unwrap_or(f32::NAN),
                                 longer_ms,
                             });
                         }
-                        let (longer, above) =
-                            (longer.min(mean_gain_samples(alpha)), level_q16(above)?);
-                        // Where the filter's own weight ends the mean before the shorter
-                        // warm-up would, there is nothing to carry on.
-                        if longer > warm {
-                            (longer, feature, above)
-                        } else {
-                            (warm, input, i32::MAX)
-                        }
+                        let longer = longer.min(mean_gain_samples(alpha));
+                        Some((longer, feature, level_q16(above)?))
                     }
-                    None => (warm, input, i32::MAX),
+                    None => None,
+                };
+                // Where the filter's own weight ends the mean before the shorter warm-up
+                // would, there is nothing to carry on.
+                let (longer, watch, watch_above) = match carried {
+                    Some((longer, feature, above)) if longer > warm => (longer, feature, above),
+                    _ => (warm, input, i32::MAX),
                 };
                 StageKind::LowPass {
                     input,
