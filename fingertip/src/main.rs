@@ -66,6 +66,11 @@ enum Command {
         /// (µm, 0.1 to 100; the envelope's is 1): a run on an arm whose encoders are coarser.
         #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
+        /// The corner of an AC coupling of the stress-rate film's amplifier (Hz, 0 to 10;
+        /// the envelope's film has none): a run whose film reads a steady rate of loading
+        /// as a rate that dies away.
+        #[arg(long, default_value_t = 0.0)]
+        film_highpass_hz: f64,
         /// With --randomize: draw a parameter from another range than the envelope's,
         /// `group.name=min..max` as docs/simulator.md names it (e.g.
         /// `plant.control_bandwidth=10..15`); may be repeated.
@@ -266,7 +271,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "ranges"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "film_highpass_hz", "ranges"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -294,6 +299,11 @@ enum Command {
         /// encoders are coarser, its loops acting on them.
         #[arg(long, default_value_t = sim::DEFAULT_ENCODER_RESOLUTION_UM)]
         encoder_um: f64,
+        /// The corner of an AC coupling of the stress-rate film's amplifier (Hz, 0 to 10;
+        /// the envelope's film has none): how the detectors fare on a film that reads a
+        /// steady rate of loading as a rate that dies away over 1 / (2 pi f) s.
+        #[arg(long, default_value_t = 0.0)]
+        film_highpass_hz: f64,
         /// Draw a parameter from another range than the envelope's, `group.name=min..max`
         /// as docs/simulator.md names it: how the detectors fare on one arm's range (e.g.
         /// `plant.control_bandwidth=10..15`, the slow loops) or beyond the envelope; may be
@@ -428,6 +438,7 @@ fn run(cli: Cli) -> Result<()> {
             lead_in_ms,
             noise_factor,
             encoder_um,
+            film_highpass_hz,
             ranges,
             out,
         } => simulate(
@@ -439,6 +450,7 @@ fn run(cli: Cli) -> Result<()> {
                 lead_in_s: lead_in_ms / 1000.0,
                 noise_factor,
                 encoder_resolution_um: encoder_um,
+                film_highpass_hz,
                 ranges,
                 ..SimOptions::default()
             },
@@ -574,6 +586,7 @@ fn run(cli: Cli) -> Result<()> {
             lead_in_ms,
             noise_factor,
             encoder_um,
+            film_highpass_hz,
             ranges,
             json,
             plot_bins,
@@ -586,6 +599,7 @@ fn run(cli: Cli) -> Result<()> {
                 lead_in_ms,
                 noise_factor,
                 encoder_um,
+                film_highpass_hz,
                 ranges,
             },
             &config,
@@ -1560,6 +1574,8 @@ struct Plan {
     noise_factor: f64,
     /// The encoders' resolution at the tip, µm ([`SimOptions::encoder_resolution_um`]).
     encoder_um: f64,
+    /// The film's AC coupling, Hz ([`SimOptions::film_highpass_hz`]).
+    film_highpass_hz: f64,
     /// Parameters drawn from other ranges than the envelope's ([`SimOptions::ranges`]).
     ranges: Vec<sim::ParamRange>,
 }
@@ -1574,6 +1590,9 @@ impl Plan {
         }
         if self.encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
             flags += &format!(" --encoder-um {}", self.encoder_um);
+        }
+        if self.film_highpass_hz > 0.0 {
+            flags += &format!(" --film-highpass-hz {}", self.film_highpass_hz);
         }
         for r in &self.ranges {
             flags += &format!(" --range {r}");
@@ -1658,6 +1677,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         lead_in_s: plan.lead_in_ms / 1000.0,
         noise_factor: plan.noise_factor,
         encoder_resolution_um: plan.encoder_um,
+        film_highpass_hz: plan.film_highpass_hz,
         ranges: plan.ranges.clone(),
         ..SimOptions::default()
     };
@@ -1980,6 +2000,7 @@ fn evaluate(
         lead_in_ms,
         noise_factor,
         encoder_um,
+        film_highpass_hz,
         ref ranges,
     } = plan;
     let (detectors, names) = load_detectors(configs)?;
@@ -2021,6 +2042,15 @@ fn evaluate(
             fingertip::readable(encoder_um)
         );
     }
+    if !(film_highpass_hz.is_finite()
+        && (0.0..=sim::MAX_FILM_HIGHPASS_HZ).contains(&film_highpass_hz))
+    {
+        bail!(
+            "--film-highpass-hz = {} must be within 0..={} Hz",
+            fingertip::readable(film_highpass_hz),
+            sim::MAX_FILM_HIGHPASS_HZ
+        );
+    }
     for r in ranges {
         r.check().map_err(|e| anyhow!("--range {e}"))?;
     }
@@ -2044,6 +2074,9 @@ fn evaluate(
     }
     if encoder_um != sim::DEFAULT_ENCODER_RESOLUTION_UM {
         conditions += &format!(", encoders resolving {encoder_um} um at the tip");
+    }
+    if film_highpass_hz > 0.0 {
+        conditions += &format!(", the film AC-coupled at {film_highpass_hz} Hz");
     }
     for r in ranges {
         conditions += &format!(", {} drawn from {} .. {}", r.name, r.min, r.max);
@@ -2072,6 +2105,7 @@ fn evaluate(
             "lead_in_ms": lead_in_ms,
             "noise_factor": noise_factor,
             "encoder_um": encoder_um,
+            "film_highpass_hz": film_highpass_hz,
             "ranges": ranges
                 .iter()
                 .map(|r| serde_json::json!({ "parameter": r.name, "min": r.min, "max": r.max }))

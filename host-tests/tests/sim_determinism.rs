@@ -322,3 +322,50 @@ fn an_encoder_resolution_quantizes_what_the_controller_reads() {
     assert!(off_grid(&steps(&coarse)) < 1e-3, "{:?}", steps(&coarse));
     assert!(off_grid(&steps(&fine)) > 0.02, "{:?}", steps(&fine));
 }
+
+/// An AC-coupled film reads a steady rate of loading as one that dies away: on the nominal
+/// very soft contact (the film loaded at a steady rate for as long as the finger presses
+/// on), the film's reading above what it read before the contact holds without the
+/// coupling and has all but died 200 ms on with a corner of 2 Hz (1 / (2 pi f) = 80 ms),
+/// where the other channels read exactly what they read without it; the trace records
+/// the corner.
+#[test]
+fn an_ac_coupled_film_reads_a_steady_load_as_a_dying_rate() {
+    let run = |film_highpass_hz| {
+        sim::simulate(
+            &Scenario::ContactVerySoft1,
+            &SimOptions {
+                film_highpass_hz,
+                duration_s: Some(0.3),
+                ..opts(7, false)
+            },
+        )
+        .unwrap()
+    };
+    let (dc, ac) = (run(0.0), run(2.0));
+    assert_eq!(dc.meta("film_highpass_hz"), None);
+    assert_eq!(ac.meta("film_highpass_hz"), Some("2"));
+    for channel in ["force_x", "force_y", "skin_accel", "pos_err_x", "vel_des_x"] {
+        assert_eq!(dc.column(channel), ac.column(channel), "{channel}");
+    }
+    let onset: f64 = dc.meta("onset_s").unwrap().parse().unwrap();
+    let rate = dc.rate_hz();
+    let row = |t: f64| (t * rate).round() as usize;
+    // The film's mean over 40 ms (two periods of mains hum) from `from` s after the onset,
+    // above its mean before the onset.
+    let rise = |t: &fingertip::trace::Trace, from: f64| {
+        let film = t.column("stress_rate").unwrap();
+        let mean = |a: usize, b: usize| film[a..b].iter().sum::<f64>() / (b - a) as f64;
+        mean(row(onset + from), row(onset + from + 0.04)) - mean(0, row(onset))
+    };
+    let (dc_early, dc_late) = (rise(&dc, 0.01), rise(&dc, 0.2));
+    let (ac_early, ac_late) = (rise(&ac, 0.01), rise(&ac, 0.2));
+    assert!(
+        dc_early > 0.3 && dc_late > 0.7 * dc_early,
+        "{dc_early} {dc_late}"
+    );
+    assert!(
+        ac_early > 0.3 && ac_late < 0.3 * ac_early,
+        "{ac_early} {ac_late}"
+    );
+}

@@ -181,6 +181,18 @@ fn bad_options_are_errors_not_panics() {
             encoder_resolution_um: f64::NAN,
             ..SimOptions::default()
         },
+        SimOptions {
+            film_highpass_hz: -1.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            film_highpass_hz: 11.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            film_highpass_hz: f64::NAN,
+            ..SimOptions::default()
+        },
     ];
     for o in bad {
         let e = sim::simulate(&Scenario::ContactHard8, &o).unwrap_err();

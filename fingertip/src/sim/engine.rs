@@ -308,6 +308,8 @@ pub(crate) struct Setup {
     pub context_rate_hz: f64,
     /// The resolution of the tip position the controller reads from its encoders (m).
     pub encoder_resolution: f64,
+    /// The corner of the stress-rate film's AC coupling (Hz); 0: none.
+    pub film_highpass_hz: f64,
 }
 
 /// What the physical event was.
@@ -1082,6 +1084,8 @@ struct SensorChain {
     oversampling: usize,
     /// The accelerometer's AC coupling.
     highpass: HighPass1,
+    /// The stress-rate film's AC coupling, where its amplifier has one.
+    film_highpass: Option<HighPass1>,
     anti_alias: AntiAliasFilter<4>,
     adc: [Adc; 4],
     /// The mains phase, advanced once per output sample.
@@ -1094,10 +1098,12 @@ struct SensorChain {
 }
 
 impl SensorChain {
-    /// Draws the hum's phases on each channel from `noise`.
+    /// Draws the hum's phases on each channel from `noise`. A `film_highpass_hz` above 0
+    /// AC-couples the stress-rate film at that corner.
     fn new<R: Rng>(
         s: &Sensors,
         film_mass: f64,
+        film_highpass_hz: f64,
         rate_hz: f64,
         oversampling: usize,
         noise: &mut R,
@@ -1137,6 +1143,8 @@ impl SensorChain {
             rate_hz,
             oversampling,
             highpass: HighPass1::new(s.accel_highpass, internal_rate),
+            film_highpass: (film_highpass_hz > 0.0)
+                .then(|| HighPass1::new(film_highpass_hz, internal_rate)),
             anti_alias: AntiAliasFilter::new(internal_rate, rate_hz),
             adc,
             mains: Phasor::new(0.0, TAU * s.hum_frequency / rate_hz),
@@ -1157,8 +1165,12 @@ impl SensorChain {
         let accel = self.highpass.process(along + self.accel_cross * across);
         let (prev_load, prev_f) = self.previous;
         let load = ph.pressing + self.film_mass * sx;
-        let stress =
+        let rate =
             ((load - prev_load) + self.stress_crosstalk * (ph.foam - prev_f)) * self.internal_rate;
+        let stress = match &mut self.film_highpass {
+            Some(hp) => hp.process(rate),
+            None => rate,
+        };
         self.previous = (load, ph.foam);
         [
             fx + self.force_cross[0] * fy,
@@ -1221,6 +1233,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let mut sensors = SensorChain::new(
         &setup.sensors,
         p.film_share * p.skin_mass,
+        setup.film_highpass_hz,
         setup.rate_hz,
         n_over,
         noise,
@@ -1566,7 +1579,7 @@ mod tests {
     fn film_reads_the_inertia_it_carries() {
         let s = Sensors::nominal();
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1);
-        let mut chain = SensorChain::new(&s, 0.004, 5000.0, 4, &mut rng);
+        let mut chain = SensorChain::new(&s, 0.004, 0.0, 5000.0, 4, &mut rng);
         let at = |a: f64| Physical {
             load: [0.0; 2],
             skin: [a, 3.0],
@@ -1649,7 +1662,7 @@ mod tests {
         s.accel_cross_axis = 0.0;
         s.accel_highpass = 0.001;
         let mut rng = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(1);
-        let mut chain = SensorChain::new(&s, 0.0, 5000.0, 4, &mut rng);
+        let mut chain = SensorChain::new(&s, 0.0, 0.0, 5000.0, 4, &mut rng);
         let analog = chain.transduce(&Physical {
             load: [1.0, 0.0],
             skin: [0.0, 10.0],
@@ -1743,6 +1756,7 @@ mod tests {
             oversampling: (required / rate_hz).ceil().max(2.0) as usize,
             context_rate_hz: 1000.0,
             encoder_resolution: ENCODER_RESOLUTION,
+            film_highpass_hz: 0.0,
         };
         let mut noise = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
         let out = run(&mut setup, &mut noise);

@@ -174,6 +174,9 @@ pub const DEFAULT_ENCODER_RESOLUTION_UM: f64 = 1.0;
 /// The finest and the coarsest [`SimOptions::encoder_resolution_um`] (µm).
 pub const ENCODER_RESOLUTION_RANGE_UM: (f64, f64) = (0.1, 100.0);
 
+/// The highest [`SimOptions::film_highpass_hz`] (Hz).
+pub const MAX_FILM_HIGHPASS_HZ: f64 = 10.0;
+
 /// Metadata key of the physical onset time in seconds (absent when nothing happened).
 pub const META_ONSET: &str = "onset_s";
 /// Metadata key of the scenario name.
@@ -673,6 +676,13 @@ pub struct SimOptions {
     /// its position error carries it. A coarser one shows how a detector fares on an arm
     /// whose encoders are. The trace records it when it is not the default.
     pub encoder_resolution_um: f64,
+    /// The corner of an AC coupling of the stress-rate film's amplifier, in Hz (0 to 10;
+    /// 0, the default, in every run of the envelope: the film reads the rate of its load
+    /// down to DC). A piezoelectric film's charge leaks away through its amplifier's input
+    /// (or a coupling capacitor blocks the amplifier's offset): a steady rate of loading
+    /// then reads as a rate that dies away over 1 / (2 pi f) s. The trace records it when
+    /// it is not 0.
+    pub film_highpass_hz: f64,
     /// Parameters a randomized run draws from another range than the envelope's (the
     /// last one given for a parameter counts): how a detector fares on one arm's, sensor's
     /// or object's range, or beyond the envelope. Each is recorded in the trace as
@@ -702,6 +712,7 @@ impl Default for SimOptions {
             lead_in_s: 0.0,
             noise_factor: 1.0,
             encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
+            film_highpass_hz: 0.0,
             ranges: Vec::new(),
         }
     }
@@ -823,6 +834,13 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         coarsest,
         "0.1 to 100 um",
     )?;
+    check(
+        "film_highpass_hz",
+        opts.film_highpass_hz,
+        0.0,
+        MAX_FILM_HIGHPASS_HZ,
+        "0 to 10 Hz",
+    )?;
     if let Some(r) = opts.ranges.first().filter(|_| !opts.randomize) {
         return Err(SimError::BadRange(format!(
             "{r}: a run with the nominal parameters draws none"
@@ -887,6 +905,7 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         oversampling: n_over,
         context_rate_hz: opts.controller_rate_hz,
         encoder_resolution: opts.encoder_resolution_um / 1e6,
+        film_highpass_hz: opts.film_highpass_hz,
     };
     let out = engine::run(&mut setup, &mut noise);
 
@@ -1297,6 +1316,9 @@ fn push_metadata(
             "encoder_resolution_um",
             &fmt_f64(opts.encoder_resolution_um),
         )?;
+    }
+    if opts.film_highpass_hz > 0.0 {
+        trace.push_metadata("film_highpass_hz", &fmt_f64(opts.film_highpass_hz))?;
     }
     for r in &opts.ranges {
         trace.push_metadata(
