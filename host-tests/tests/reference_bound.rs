@@ -281,14 +281,16 @@ fn stage_for(
                             above: f32::from(p.picks[2]) - 128.0,
                         }
                     }),
-                    // Of those with a warm-up, most carry it on by 1-50 ms when another
-                    // exact slot is above a level within its usual range.
+                    // Of those with a warm-up, most carry it on by 1-50 ms (and by at
+                    // least one sample more, as the stage needs) when another exact slot
+                    // is above a level within its usual range.
                     warm_up_longer: warm_up_ms
                         .filter(|_| !p.param.is_multiple_of(5) && info[pick(3)].exact)
                         .map(|ms| LongerWarmUp {
                             feature: n(pick(3)),
                             above: f32::from(p.picks[1]) - 128.0,
-                            warm_up_ms: ms + 1.0 + f32::from(p.param % 50),
+                            warm_up_ms: (ms + 1.0 + f32::from(p.param % 50))
+                                .max(ms + 1500.0 / rate_hz),
                         }),
                 },
                 SlotInfo {
