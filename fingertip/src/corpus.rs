@@ -98,6 +98,8 @@ pub struct RecordingResult {
     pub name: String,
     /// Its length (s).
     pub seconds: f64,
+    /// Its `scenario` metadata, by which its events are binned.
+    pub scenario: Option<String>,
     /// How it went.
     pub score: RecordingScore,
 }
@@ -109,6 +111,7 @@ impl RecordingResult {
         RecordingResult {
             name: name.to_string(),
             seconds: last - first,
+            scenario: streamed.scenario.clone(),
             score: score_recording(
                 &streamed.labelled,
                 &streamed.decisions,
@@ -117,6 +120,29 @@ impl RecordingResult {
             ),
         }
     }
+}
+
+/// One event's outcomes tallied, and per bin of the scenarios of the recordings they are
+/// from (in name order; outcomes from recordings without one are in no bin), where any
+/// has one.
+fn tally_by_scenario(event: &str, outcomes: &[(Outcome, Option<&str>)]) -> ScenarioReport {
+    let (outcomes, scenarios): (Vec<Outcome>, Vec<Option<&str>>) = outcomes.iter().cloned().unzip();
+    let mut labels: Vec<String> = scenarios.iter().flatten().map(|s| s.to_string()).collect();
+    labels.sort_unstable();
+    labels.dedup();
+    if labels.is_empty() {
+        return ScenarioReport::tally(event, Some(event), &outcomes);
+    }
+    let binned: Vec<Option<usize>> = scenarios
+        .iter()
+        .map(|s| s.and_then(|s| labels.iter().position(|l| l == s)))
+        .collect();
+    ScenarioReport::tally_binned(
+        event,
+        Some(event),
+        &outcomes,
+        ("the recordings' scenario", &labels, &binned),
+    )
 }
 
 /// A corpus's results, tallied per event name.
@@ -151,7 +177,8 @@ impl CorpusReport {
         results: &[RecordingResult],
         after_ms: f64,
     ) -> CorpusReport {
-        let mut outcomes: Vec<Vec<Outcome>> = vec![Vec::new(); event_names.len()];
+        // Each event's outcomes, with the scenario of the recording each is from.
+        let mut outcomes: Vec<Vec<(Outcome, Option<&str>)>> = vec![Vec::new(); event_names.len()];
         let mut failures = Vec::new();
         let mut false_alarms = Vec::new();
         let mut false_by_event = vec![0; event_names.len()];
@@ -166,7 +193,7 @@ impl CorpusReport {
                     intrusions_by_event[i] += 1;
                 }
                 if let Some(i) = event_names.iter().position(|n| n == event) {
-                    outcomes[i].push(outcome.clone());
+                    outcomes[i].push((outcome.clone(), r.scenario.as_deref()));
                 }
                 if !outcome.is_right() {
                     failures.push((
@@ -195,7 +222,7 @@ impl CorpusReport {
                 .iter()
                 .zip(&outcomes)
                 .filter(|(_, o)| !o.is_empty())
-                .map(|(name, o)| ScenarioReport::tally(name, Some(name), o))
+                .map(|(name, o)| tally_by_scenario(name, o))
                 .collect(),
             recordings: results.len(),
             hours: results.iter().map(|r| r.seconds).sum::<f64>() / 3600.0,
@@ -264,5 +291,52 @@ impl CorpusReport {
             "false_alarms_per_hour": self.false_per_hour(),
             "outside_event_hours": self.outside_hours,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn recording(scenario: Option<&str>, outcome: Outcome) -> RecordingResult {
+        RecordingResult {
+            name: format!("{scenario:?}.csv"),
+            seconds: 1.0,
+            scenario: scenario.map(str::to_string),
+            score: RecordingScore {
+                events: vec![("contact".to_string(), 0.02, outcome)],
+                false_confirmations: Vec::new(),
+                outside_s: 0.5,
+            },
+        }
+    }
+
+    /// An event's tally is binned by the scenarios its recordings name, in name order; a
+    /// recording without one counts in the event's row but in no bin, and a corpus where
+    /// none names one is not binned.
+    #[test]
+    fn events_are_binned_by_the_recordings_scenario() {
+        let right = || Outcome::Correct { latency_s: 0.002 };
+        let results = [
+            recording(Some("soft"), right()),
+            recording(Some("hard"), right()),
+            recording(Some("soft"), Outcome::Missed),
+            recording(None, right()),
+        ];
+        let events = ["contact".to_string()];
+        let report = CorpusReport::tally(&events, &results, 100.0);
+        let contact = &report.events[0];
+        assert_eq!((contact.runs, contact.correct), (4, 3));
+        assert_eq!(contact.binned_by, "the recordings' scenario");
+        let bins: Vec<(&str, usize, usize, usize)> = contact
+            .bins
+            .iter()
+            .map(|b| (b.name.as_str(), b.runs, b.correct, b.missed))
+            .collect();
+        assert_eq!(bins, [("hard", 1, 1, 0), ("soft", 2, 1, 1)]);
+
+        let unnamed = [recording(None, right())];
+        let report = CorpusReport::tally(&events, &unnamed, 100.0);
+        assert!(report.events[0].bins.is_empty() && report.events[0].binned_by.is_empty());
     }
 }

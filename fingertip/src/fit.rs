@@ -505,6 +505,7 @@ struct Recorded {
     name: String,
     span: (f64, f64),
     labelled: Vec<crate::replay::Labelled>,
+    scenario: Option<String>,
     ticks: Vec<(u32, Judged)>,
 }
 
@@ -551,6 +552,7 @@ impl Recorded {
                 name: name.clone(),
                 span: streamed.span_s,
                 labelled: streamed.labelled,
+                scenario: streamed.scenario,
                 ticks,
             })
             .collect())
@@ -636,6 +638,7 @@ struct Tried {
     name: String,
     span: (f64, f64),
     labelled: Vec<crate::replay::Labelled>,
+    scenario: Option<String>,
     /// `[set]`: the confirmations that set of levels raises.
     confirmations: Vec<Vec<DecisionRecord>>,
 }
@@ -700,6 +703,7 @@ fn scores(
         .map(|t| RecordingResult {
             name: t.name.clone(),
             seconds: t.span.1 - t.span.0,
+            scenario: t.scenario.clone(),
             score: crate::score::score_recording(
                 &t.labelled,
                 &chosen(t, choice, events),
@@ -737,6 +741,7 @@ fn try_sets(
             name: r.name.clone(),
             span: r.span,
             labelled: r.labelled.clone(),
+            scenario: r.scenario.clone(),
             confirmations: r.confirmations(sets, excluded_by, names),
         })
         .collect()
@@ -1292,6 +1297,7 @@ mod tests {
             name: "r".into(),
             span: (0.0, 1.0),
             labelled: Vec::new(),
+            scenario: None,
             ticks: vec![
                 (0, tick(0.0, [high, 0])),
                 (0, tick(0.001, [0, 0])),

@@ -357,6 +357,9 @@ pub struct Streamed {
     pub span_s: (f64, f64),
     /// The events labelled in the trace's `truth` column, in order.
     pub labelled: Vec<Labelled>,
+    /// The trace's `scenario` metadata, from a comment before its header: what a simulated
+    /// run records, and how a corpus may name what each recording shows.
+    pub scenario: Option<String>,
 }
 
 impl Streamed {
@@ -431,6 +434,7 @@ struct Part<'d> {
     rules: RowRules<'d>,
     ticker: Ticker,
     period: f64,
+    scenario: Option<String>,
 }
 
 /// What a streamed replay read: the trace's name, its rows, the times of its first and
@@ -456,6 +460,11 @@ impl<'d> Part<'d> {
             rules: RowRules::new(detector, name),
             ticker,
             period: 1.0 / f64::from(detector.rate_hz()),
+            scenario: reader
+                .metadata()
+                .iter()
+                .find(|(key, _)| key == "scenario")
+                .map(|(_, value)| value.clone()),
         })
     }
 
@@ -470,6 +479,7 @@ impl<'d> Part<'d> {
             rate_hz,
             span_s: read.span_s,
             labelled: self.rules.labelled,
+            scenario: self.scenario,
         })
     }
 }

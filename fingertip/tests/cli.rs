@@ -853,6 +853,26 @@ fn evaluate_scores_labelled_recordings() {
     );
     assert_eq!(event("contact")["missed"].as_u64(), Some(1));
     assert_eq!(event("link_collision")["correct"].as_u64(), Some(1));
+    // Each event binned by the `scenario` its recordings name, as the simulator writes it.
+    assert!(
+        stdout.contains("  by the recordings' scenario:"),
+        "{stdout}"
+    );
+    assert_eq!(event("contact")["binned_by"], "the recordings' scenario");
+    let bin = &event("contact")["bins"][0];
+    assert_eq!(
+        (
+            bin["name"].as_str(),
+            bin["runs"].as_u64(),
+            bin["correct"].as_u64()
+        ),
+        (Some("contact_hard_8"), Some(2), Some(1)),
+        "{report}"
+    );
+    assert_eq!(
+        event("link_collision")["bins"][0]["name"].as_str(),
+        Some("link_collision_8")
+    );
     assert_eq!(report["false_alarms"].as_u64(), Some(0));
     assert!(report["false_alarms_per_hour"].is_number() && report["config"].is_string());
 
