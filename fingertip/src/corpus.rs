@@ -163,6 +163,9 @@ pub struct CorpusReport {
     pub intrusions_by_event: Vec<usize>,
     /// The time outside every event's window (h).
     pub outside_hours: f64,
+    /// Per scenario the recordings name, in name order: its false confirmations and its
+    /// time outside every event's window (h). Empty where none names one.
+    pub false_by_scenario: Vec<(String, usize, f64)>,
     /// How long after an event's end a confirmation counted for it (ms).
     pub after_ms: f64,
     /// What went wrong, a line each: the recording, the event and time, the outcome; the
@@ -217,6 +220,21 @@ impl CorpusReport {
         }
         let false_confirmations = false_alarms.len();
         failures.extend(false_alarms);
+        let mut false_by_scenario: Vec<(String, usize, f64)> = Vec::new();
+        for r in results {
+            let Some(scenario) = &r.scenario else {
+                continue;
+            };
+            let at = match false_by_scenario.binary_search_by(|(s, ..)| s.cmp(scenario)) {
+                Ok(at) => at,
+                Err(at) => {
+                    false_by_scenario.insert(at, (scenario.clone(), 0, 0.0));
+                    at
+                }
+            };
+            false_by_scenario[at].1 += r.score.false_confirmations.len();
+            false_by_scenario[at].2 += r.score.outside_s / 3600.0;
+        }
         CorpusReport {
             events: event_names
                 .iter()
@@ -230,6 +248,7 @@ impl CorpusReport {
             false_by_event,
             intrusions_by_event,
             outside_hours: results.iter().map(|r| r.score.outside_s).sum::<f64>() / 3600.0,
+            false_by_scenario,
             after_ms,
             failures,
         }
@@ -260,6 +279,12 @@ impl CorpusReport {
             self.outside_hours,
             self.false_per_hour()
         )?;
+        if !self.false_by_scenario.is_empty() {
+            writeln!(out, "  by the recordings' scenario:")?;
+            for (scenario, n, hours) in &self.false_by_scenario {
+                writeln!(out, "  {scenario:<26} {n:>6} in {hours:.4} h")?;
+            }
+        }
         if !self.failures.is_empty() {
             writeln!(
                 out,
@@ -290,6 +315,15 @@ impl CorpusReport {
             "false_alarms": self.false_confirmations,
             "false_alarms_per_hour": self.false_per_hour(),
             "outside_event_hours": self.outside_hours,
+            "false_alarms_by_scenario": self
+                .false_by_scenario
+                .iter()
+                .map(|(scenario, n, hours)| serde_json::json!({
+                    "scenario": scenario,
+                    "false_alarms": n,
+                    "outside_event_hours": hours,
+                }))
+                .collect::<Vec<_>>(),
         })
     }
 }
@@ -311,9 +345,10 @@ mod tests {
         }
     }
 
-    /// An event's tally is binned by the scenarios its recordings name, in name order; a
-    /// recording without one counts in the event's row but in no bin, and a corpus where
-    /// none names one is not binned.
+    /// An event's tally is binned by the scenarios its recordings name, in name order, and
+    /// so are the false confirmations with the time outside events; a recording without
+    /// one counts in the event's row but in no bin, and a corpus where none names one is
+    /// not binned.
     #[test]
     fn events_are_binned_by_the_recordings_scenario() {
         let right = || Outcome::Correct { latency_s: 0.002 };
@@ -334,9 +369,22 @@ mod tests {
             .map(|b| (b.name.as_str(), b.runs, b.correct, b.missed))
             .collect();
         assert_eq!(bins, [("hard", 1, 1, 0), ("soft", 2, 1, 1)]);
+        // Each named scenario's time outside events and false confirmations, in name order.
+        let mut quiet = recording(Some("free"), right());
+        quiet.score.false_confirmations = vec![("contact".to_string(), 0.7)];
+        let with_false: Vec<RecordingResult> = results.iter().cloned().chain([quiet]).collect();
+        let report = CorpusReport::tally(&events, &with_false, 100.0);
+        let by: Vec<(&str, usize)> = report
+            .false_by_scenario
+            .iter()
+            .map(|(s, n, _)| (s.as_str(), *n))
+            .collect();
+        assert_eq!(by, [("free", 1), ("hard", 0), ("soft", 0)]);
+        assert!((report.false_by_scenario[2].2 - 1.0 / 3600.0).abs() < 1e-12);
 
         let unnamed = [recording(None, right())];
         let report = CorpusReport::tally(&events, &unnamed, 100.0);
         assert!(report.events[0].bins.is_empty() && report.events[0].binned_by.is_empty());
+        assert!(report.false_by_scenario.is_empty());
     }
 }

@@ -873,6 +873,19 @@ fn evaluate_scores_labelled_recordings() {
         event("link_collision")["bins"][0]["name"].as_str(),
         Some("link_collision_8")
     );
+    let by_scenario: Vec<_> = report["false_alarms_by_scenario"]
+        .as_array()
+        .expect("a list")
+        .iter()
+        .map(|s| (s["scenario"].as_str(), s["false_alarms"].as_u64()))
+        .collect();
+    assert_eq!(
+        by_scenario,
+        [
+            (Some("contact_hard_8"), Some(0)),
+            (Some("link_collision_8"), Some(0))
+        ]
+    );
     assert_eq!(report["false_alarms"].as_u64(), Some(0));
     assert!(report["false_alarms_per_hour"].is_number() && report["config"].is_string());
 
