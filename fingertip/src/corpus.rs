@@ -220,20 +220,13 @@ impl CorpusReport {
         }
         let false_confirmations = false_alarms.len();
         failures.extend(false_alarms);
-        let mut false_by_scenario: Vec<(String, usize, f64)> = Vec::new();
+        let mut false_by_scenario = std::collections::BTreeMap::<&str, (usize, f64)>::new();
         for r in results {
-            let Some(scenario) = &r.scenario else {
-                continue;
-            };
-            let at = match false_by_scenario.binary_search_by(|(s, ..)| s.cmp(scenario)) {
-                Ok(at) => at,
-                Err(at) => {
-                    false_by_scenario.insert(at, (scenario.clone(), 0, 0.0));
-                    at
-                }
-            };
-            false_by_scenario[at].1 += r.score.false_confirmations.len();
-            false_by_scenario[at].2 += r.score.outside_s / 3600.0;
+            if let Some(scenario) = &r.scenario {
+                let (n, hours) = false_by_scenario.entry(scenario).or_default();
+                *n += r.score.false_confirmations.len();
+                *hours += r.score.outside_s / 3600.0;
+            }
         }
         CorpusReport {
             events: event_names
@@ -248,7 +241,10 @@ impl CorpusReport {
             false_by_event,
             intrusions_by_event,
             outside_hours: results.iter().map(|r| r.score.outside_s).sum::<f64>() / 3600.0,
-            false_by_scenario,
+            false_by_scenario: false_by_scenario
+                .into_iter()
+                .map(|(scenario, (n, hours))| (scenario.to_string(), n, hours))
+                .collect(),
             after_ms,
             failures,
         }

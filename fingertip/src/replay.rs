@@ -434,15 +434,15 @@ struct Part<'d> {
     rules: RowRules<'d>,
     ticker: Ticker,
     period: f64,
-    scenario: Option<String>,
 }
 
 /// What a streamed replay read: the trace's name, its rows, the times of its first and
-/// last rows (s).
+/// last rows (s), its `scenario` metadata.
 struct Read {
     name: String,
     rows: usize,
     span_s: (f64, f64),
+    scenario: Option<String>,
 }
 
 impl<'d> Part<'d> {
@@ -460,11 +460,6 @@ impl<'d> Part<'d> {
             rules: RowRules::new(detector, name),
             ticker,
             period: 1.0 / f64::from(detector.rate_hz()),
-            scenario: reader
-                .metadata()
-                .iter()
-                .find(|(key, _)| key == "scenario")
-                .map(|(_, value)| value.clone()),
         })
     }
 
@@ -479,7 +474,7 @@ impl<'d> Part<'d> {
             rate_hz,
             span_s: read.span_s,
             labelled: self.rules.labelled,
-            scenario: self.scenario,
+            scenario: read.scenario.clone(),
         })
     }
 }
@@ -492,6 +487,11 @@ fn replay_rows(
     mut each_tick: impl FnMut(usize, &StreamTick<'_>),
 ) -> Result<Read, StreamError> {
     let name = reader.name().to_string();
+    let scenario = reader
+        .metadata()
+        .iter()
+        .find(|(key, _)| key == crate::sim::META_SCENARIO)
+        .map(|(_, value)| value.clone());
     // Times of the first and last rows, and of the levels' ticks, which the stream forgets:
     // a tick's time is the first row's plus the tick times the period, exact for a uniform
     // trace.
@@ -560,6 +560,7 @@ fn replay_rows(
             name,
             rows,
             span_s: (first_t.unwrap_or(0.0), last_t),
+            scenario,
         }),
     }
 }
