@@ -253,17 +253,27 @@ impl Compiled {
             |w| {
                 self.write_event_arms(w, |w, i, e| {
                     let [alert, confirm] = e.levels;
+                    // One test per excluding event, written out.
+                    let excluded: Vec<String> = (0..EventMask::BITS as usize)
+                        .filter(|j| e.excluded_by & (1 << j) != 0)
+                        .map(|j| format!("confirmed(state, {j})"))
+                        .collect();
+                    let excluded = if excluded.is_empty() {
+                        "false".to_string()
+                    } else {
+                        excluded.join(" | ")
+                    };
                     let _ = writeln!(
                         w,
                         "                if out.unjudgeable & {:#b} != 0 {{\n                    \
                          reset_event(state, {i});\n                }} else {{\n                    \
                          const LEVELS: [LevelParams; 2] = [{}, {}];\n                    \
-                         decide_event(state, {i}, &LEVELS, {}, {:#b}, out.confidences[{i}], now, out);\n                }}",
+                         let excluded = {excluded};\n                    \
+                         decide_event(state, {i}, &LEVELS, {}, excluded, out.confidences[{i}], now, out);\n                }}",
                         1u32 << i,
                         alert.rust(),
                         confirm.rust(),
                         e.onset_level,
-                        e.excluded_by
                     );
                 })
             },

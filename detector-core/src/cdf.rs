@@ -144,27 +144,46 @@ impl Ramp {
         if span <= 0 {
             return None;
         }
-        let span = span as u64; // 1..=2^32-1
-        let (pre, scale) = if span < NARROW { (15, 32) } else { (0, 47) };
-        let mul = ((1u64 << scale) + span / 2) / span;
+        let span = span as u32; // 1..=2^32-1
+        let (pre, mul) = Ramp::scaling(span);
         Some(Ramp {
             start,
-            span: span as u32,
-            // Only a one-unit span reaches 2^32; its only distance below the span is 0.
-            mul: mul.min(u32::MAX as u64) as u32,
+            span,
+            mul,
             pre,
         })
     }
 
-    /// Position of a distance `d = x - start` (already known non-negative) along the ramp.
+    /// The pre-shift and the multiplier of a ramp `span` long (at least 1): `2³² / span`
+    /// after a shift by 15 for a narrow one, `2⁴⁷ / span` for a wide one, rounded. Only a
+    /// one-unit span would reach 2³²; its only distance below the span is 0.
+    const fn scaling(span: u32) -> (u8, u32) {
+        let span = span as u64;
+        let (pre, scale) = if span < NARROW { (15, 32) } else { (0, 47) };
+        let mul = ((1u64 << scale) + span / 2) / span;
+        (
+            pre,
+            if mul > u32::MAX as u64 {
+                u32::MAX
+            } else {
+                mul as u32
+            },
+        )
+    }
+
+    /// Position of a distance `d = x - start` (already known non-negative) along the ramp,
+    /// at most 2¹⁵: for `d` ≤ `span` − 1 and the rounded multiplier of
+    /// [`Ramp::scaling`], `d · mul` + 2³¹ stays below (2¹⁵ + 1) · 2³² (a narrow ramp's
+    /// `mul` errs by at most ½, which `d` < 2¹⁷ turns into less than 2³¹ after the shift; a
+    /// wide one's by at most ½ over `d` < 2³²). Every ramp is checked to carry that
+    /// multiplier ([`Ramp::valid`]), so no clamp is needed; a property test holds the bound.
     #[inline(always)]
     fn along(&self, d: u32) -> u32 {
         if d >= self.span {
             return 1 << 15;
         }
         let d = d << self.pre;
-        let t = ((d as u64 * self.mul as u64 + (1 << 31)) >> 32) as u32;
-        t.min(1 << 15)
+        ((d as u64 * self.mul as u64 + (1 << 31)) >> 32) as u32
     }
 
     /// Position of `x` along the ramp, Q15 in [0, 32768].
@@ -346,15 +365,21 @@ impl Cdf {
             Shape::Above(t) => u32::from(x >= t) << 15,
             Shape::Below(t) => u32::from(x <= t) << 15,
         };
-        Confidence::from_bits_clamped(q)
+        // A position along a ramp is at most 2^15 (`Ramp::along`), and so is the S-function
+        // of one: every shape stays within [0, 1] without a clamp.
+        Confidence::from_bits_within_one(q)
     }
 }
 
 impl Ramp {
-    /// Whether a ramp is one [`Ramp::new`] can make: a shifted distance stays below 2³².
+    /// Whether a ramp is one [`Ramp::new`] can make: a shifted distance stays below 2³²
+    /// and the multiplier is the span's own, so that a position along it never passes 1.
     const fn valid(&self) -> bool {
-        let narrow = (self.span as u64) < NARROW;
-        self.span != 0 && self.pre == if narrow { 15 } else { 0 }
+        if self.span == 0 {
+            return false;
+        }
+        let (pre, mul) = Ramp::scaling(self.span);
+        self.pre == pre && self.mul == mul
     }
 
     /// A ramp from its raw values, for generated code's constants: values [`Ramp::new`]
@@ -526,6 +551,15 @@ impl Cdf {
 mod tests {
     use super::*;
 
+    /// An image in memory.
+    struct Bytes(std::vec::Vec<u8>);
+
+    impl Sink for Bytes {
+        fn put(&mut self, bytes: &[u8]) {
+            self.0.extend_from_slice(bytes);
+        }
+    }
+
     fn eval(spec: CdfSpec, x: f32) -> f32 {
         Cdf::new(&spec)
             .expect("valid")
@@ -622,6 +656,50 @@ mod tests {
             (eval(b, 0.0), eval(b, 1e-4), eval(b, -5.0)),
             (1.0, 0.0, 1.0)
         );
+    }
+
+    #[test]
+    fn a_position_along_a_ramp_never_passes_one() {
+        // The position grows with the distance, so the last distance below each span is
+        // the one to check: every narrow span, and wide ones from the narrowest to the
+        // widest in steps that also land next to powers of two.
+        let wide = (17..32).flat_map(|b| {
+            let p = 1u64 << b;
+            [p - 1, p, p + 1, p + p / 3, 2 * p - 3]
+        });
+        let spans = (1..NARROW).chain(wide).chain([u64::from(u32::MAX)]);
+        for span in spans {
+            let end = i64::from(i32::MIN) + span as i64;
+            let ramp = Ramp::new(i32::MIN, end as i32).expect("ordered");
+            let span = span as u32;
+            assert_eq!(ramp.span, span);
+            assert!(ramp.along(span - 1) <= 1 << 15, "span {span}");
+            assert_eq!(ramp.along(span), 1 << 15, "span {span}");
+        }
+    }
+
+    #[test]
+    fn a_ramp_whose_multiplier_is_not_its_spans_own_is_refused() {
+        let good = Ramp::new(-5 << 16, 7 << 16).expect("ordered");
+        assert!(good.valid());
+        for mul in [good.mul + 1, good.mul - 1, 0, u32::MAX] {
+            let bad = Ramp { mul, ..good };
+            assert!(!bad.valid(), "mul {mul}");
+            let mut image = Bytes(std::vec::Vec::new());
+            bad.write_image(&mut image);
+            assert_eq!(
+                Ramp::read_image(&mut Reader::new(&image.0)),
+                Err(ImageError::Invalid("CDF ramp"))
+            );
+        }
+        assert!(
+            !Ramp {
+                pre: 15 - good.pre,
+                ..good
+            }
+            .valid()
+        );
+        assert!(!Ramp { span: 0, ..good }.valid());
     }
 
     #[test]

@@ -14,8 +14,9 @@ use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL, taps_valid};
 use crate::image::{ImageError, Reader, Section};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::state::{
-    EventId, EventState, Inputs, LevelParams, ONE, Output, PhaseId, State, StateError, clear_psi,
-    decide_event, eq14, eval_psi, load_sample, product, psi_value, reset_event, step_feature,
+    EventId, EventState, Inputs, LevelParams, ONE, Output, PhaseId, State, StateError,
+    any_confirmed, clear_psi, decide_event, eq14, eval_psi, load_sample, product, psi_value,
+    reset_event, step_feature,
 };
 use crate::tick::DetectorTick;
 use crate::{
@@ -534,16 +535,8 @@ impl DetectorTick for Detector {
                 continue;
             }
             let c = out.confidences[i & (MAX_EVENTS - 1)];
-            decide_event(
-                state,
-                i,
-                &e.levels,
-                e.onset_level,
-                e.excluded_by,
-                c,
-                now,
-                out,
-            );
+            let excluded = any_confirmed(state, e.excluded_by);
+            decide_event(state, i, &e.levels, e.onset_level, excluded, c, now, out);
         }
     }
 }

@@ -124,6 +124,15 @@ impl Confidence {
         }
     }
 
+    /// From raw Q15 bits its caller has bounded by one (checked in debug builds): for
+    /// arithmetic whose result provably lies in [0, 1], where a clamp would cost the tick
+    /// instructions for nothing.
+    #[inline(always)]
+    pub(crate) const fn from_bits_within_one(bits: u32) -> Confidence {
+        debug_assert!(bits <= Confidence::ONE.0 as u32);
+        Confidence(bits as u16)
+    }
+
     /// From raw Q15 bits, clamping anything above one to one.
     pub const fn from_bits_clamped(bits: u32) -> Confidence {
         if bits >= Confidence::ONE.0 as u32 {

@@ -10,7 +10,7 @@ pub use crate::expr::Rust;
 pub use crate::feature::{Stage, StageKind};
 pub use crate::num::{ChannelMask, Confidence, Tick};
 pub use crate::state::{
-    Inputs, LevelParams, ONE, Output, State, clear_psi, decide_event, eq14, eval_psi, load_sample,
-    mirror_psi, product, psi_value, reset_event, step_feature,
+    Inputs, LevelParams, ONE, Output, State, clear_psi, confirmed, decide_event, eq14, eval_psi,
+    load_sample, mirror_psi, product, psi_value, reset_event, step_feature,
 };
 pub use crate::tick::DetectorTick;

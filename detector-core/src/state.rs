@@ -557,10 +557,30 @@ pub fn clear_psi(state: &mut State, k: usize) {
     state.psi[k & (MAX_PSI - 1)] = 0;
 }
 
+/// Whether event `j`'s confirm level is up, as it stands: what holds down the events it
+/// excludes. Generated code tests each excluding event with it, one load each.
+#[inline(always)]
+pub fn confirmed(state: &State, j: usize) -> bool {
+    state.events[j & (MAX_EVENTS - 1)].levels[1].up
+}
+
+/// Whether any event of `mask` has its confirm level up ([`confirmed`] over the mask).
+#[inline(always)]
+pub fn any_confirmed(state: &State, mask: EventMask) -> bool {
+    let mut rest = mask;
+    let mut any = false;
+    while rest != 0 {
+        any |= confirmed(state, rest.trailing_zeros() as usize);
+        rest &= rest - 1;
+    }
+    any
+}
+
 /// Decision levels and onset of event `i` at confidence `c`: tracks the onset, steps the
-/// alert and confirm levels, and reports them in `out`. While an event of `excluded_by`
-/// has its confirm level up (as it stands when this event is decided: this tick's for
-/// events decided before it, the last tick's for those after), both levels are held down.
+/// alert and confirm levels, and reports them in `out`. While `excluded` (an event that
+/// excludes this one has its confirm level up, as it stands when this event is decided:
+/// this tick's for events decided before it, the last tick's for those after), both
+/// levels are held down.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 pub fn decide_event(
@@ -568,21 +588,12 @@ pub fn decide_event(
     i: usize,
     levels: &[LevelParams; 2],
     onset_level: u16,
-    excluded_by: EventMask,
+    excluded: bool,
     c: Confidence,
     now: Tick,
     out: &mut Output,
 ) {
     let i = i & (MAX_EVENTS - 1);
-    // Bit by bit over the mask, which the generated tick has as a constant: one load per
-    // excluding event, not one per slot.
-    let mut excluded = false;
-    let mut rest = excluded_by;
-    while rest != 0 {
-        let j = rest.trailing_zeros() as usize & (MAX_EVENTS - 1);
-        excluded |= state.events[j].levels[1].up;
-        rest &= rest - 1;
-    }
     let st = &mut state.events[i];
     let bit: EventMask = 1 << i;
     let q = c.to_bits();
