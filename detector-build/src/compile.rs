@@ -397,7 +397,7 @@ impl Compiled {
         }
         // A little float slack so that weights like 0.1 + 0.2 + 0.7 pass; the quantized
         // sum must still not exceed what the loader allows.
-        if total > 2.0 + 1e-5 || total_q15 > detector_core::MAX_WEIGHT_SUM_Q15 {
+        if total > 3.0 + 1e-5 || total_q15 > detector_core::MAX_WEIGHT_SUM_Q15 {
             return err(Item::Event(e.name.clone()), Problem::WeightSum(total));
         }
         self.events.push(event);

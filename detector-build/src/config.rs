@@ -81,7 +81,7 @@ pub struct ContextTerm {
 pub struct SensorTerm {
     /// The feature judged.
     pub feature: String,
-    /// Its weight in [0, 1]; an event's weights sum to at most 2 (eq. 14's sum saturates at
+    /// Its weight in [0, 1]; an event's weights sum to at most 3 (eq. 14's sum saturates at
     /// 1: terms whose weights together exceed 1 are each sufficient to that extent).
     pub weight: f32,
     /// How its value maps to a confidence for this event.
@@ -221,7 +221,7 @@ pub enum Problem {
     Cdf(CdfError),
     /// A weight is not within [0, 1].
     Weight(f32),
-    /// The sensor weights sum above 1.
+    /// The sensor weights sum above 3.
     WeightSum(f32),
     /// A confidence level (`on`, `off` or `onset_level`) is not within its allowed range.
     Level {
@@ -288,7 +288,7 @@ impl core::fmt::Display for Problem {
             Problem::Stage(e) => write!(f, "{e}"),
             Problem::Cdf(e) => write!(f, "cdf: {e}"),
             Problem::Weight(w) => write!(f, "weight = {w} must be within [0, 1]"),
-            Problem::WeightSum(s) => write!(f, "sensor weights sum to {s:.3}, above 2"),
+            Problem::WeightSum(s) => write!(f, "sensor weights sum to {s:.3}, above 3"),
             Problem::Level { param, value, rule } => write!(f, "{param} = {value} {rule}"),
             Problem::Scale(k) => write!(f, "scale = {k} must be a positive, finite number"),
             Problem::DistinctTerms(n) => write!(

@@ -46,10 +46,11 @@ pub const MAX_TERMS: usize = 8;
 pub const MAX_DISTINCT_TERMS: usize = 64;
 /// Longest name of a channel, feature, event or phase, in bytes.
 pub const NAME_LEN: usize = 24;
-/// Most an event's sensor weights may sum to, in Q15 (2, and two units of rounding): eq. 14
+/// Most an event's sensor weights may sum to, in Q15 (3, and three units of rounding): eq. 14
 /// saturates the weighted sum at 1, so terms whose weights together exceed 1 are each
-/// sufficient to the extent of their weight (two terms of weight 1 are either/or).
-pub const MAX_WEIGHT_SUM_Q15: u32 = 2 * (1 << 15) + 2;
+/// sufficient to the extent of their weight (three terms of weight 1 are each sufficient:
+/// three paths to the same physical evidence). The weighted sum then stays below 2³².
+pub const MAX_WEIGHT_SUM_Q15: u32 = 3 * (1 << 15) + 3;
 /// Longest window of a short-time-energy or mean feature, in samples. All such features
 /// together hold at most twice this much history.
 pub const MAX_WINDOW: usize = 128;

@@ -498,7 +498,7 @@ pub const fn product(acc: u32, q: u32) -> u32 {
 
 /// Eq. 14 from an event's context `product` (Q15) and the sum of its sensor terms'
 /// weight (Q15) × ψ (Q15): product × min(1, Σ w ψ), rounded to nearest. Weights sum to at
-/// most [`MAX_WEIGHT_SUM_Q15`](crate::MAX_WEIGHT_SUM_Q15) (2¹⁶ + 2), so the sum stays
+/// most [`MAX_WEIGHT_SUM_Q15`](crate::MAX_WEIGHT_SUM_Q15) (3 · 2¹⁵ + 3), so the sum stays
 /// below 2³²  − 2¹⁴.
 #[inline(always)]
 pub const fn eq14(product: u32, weighted_sum: u32) -> Confidence {
@@ -625,5 +625,22 @@ pub fn decide_event(
     }
     if raised_confirm {
         let _ = out.decisions.push(decision(Level::Confirm));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eq14_saturates_at_the_largest_weighted_sum_an_image_may_carry() {
+        // Every sensor term at 1 with the weights at their largest allowed sum: the sum
+        // saturates at 1 without overflowing (debug builds check the arithmetic).
+        let full = crate::MAX_WEIGHT_SUM_Q15 * ONE;
+        assert_eq!(eq14(ONE, full), Confidence::ONE);
+        assert_eq!(eq14(ONE / 2, full).to_bits(), 1 << 14);
+        assert_eq!(eq14(0, full), Confidence::ZERO);
+        // Just below saturation the sum counts as it is.
+        assert_eq!(eq14(ONE, ONE * (1 << 14)).to_bits(), 1 << 14);
     }
 }

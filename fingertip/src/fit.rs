@@ -11,10 +11,12 @@
 //!   lets through) to what nine in ten of the event's occurrences reach in the window (the
 //!   10 % quantile of their peaks); falling, mirrored, when the base's is. A term whose feature does not
 //!   separate the event (balanced accuracy of the best single threshold below
-//!   [`MIN_SEPARATION`]) stops the fit with the figures.
-//! - **Weights**: in proportion to each sensor term's separation above chance from the
-//!   time outside events and from every other labelled event, the weakest of these,
-//!   summing to the base's total (the base's weights when no term separates).
+//!   [`MIN_SEPARATION`]) keeps the base's numbers when another of the event's terms
+//!   separates (a corpus of hard contacts never exercises a slow path), and stops the fit
+//!   with the figures when none does.
+//! - **Weights**: in proportion to each fitted sensor term's separation above chance from
+//!   the time outside events and from every other labelled event, the weakest of these,
+//!   summing to what the kept terms leave of the base's total.
 //! - **Context terms** (permission, placed by the user for physical reasons a corpus may
 //!   not show, such as a veto on sudden commanded motion): kept, and widened only where
 //!   the event's own central 95 % lies beyond the confidence they give.
@@ -221,7 +223,9 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
             });
         }
         let total: f32 = event.sensor.iter().map(|t| t.weight).sum();
+        // Each term's separation above chance, `None` for a term kept as the base has it.
         let mut strengths = Vec::new();
+        let mut unseparated = None;
         for term in &mut event.sensor {
             let Some(f) = feature_index(&term.feature) else {
                 continue;
@@ -230,7 +234,21 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
             let others = let_through(f);
             let (threshold, above, accuracy) = best_threshold(&values, &others);
             if accuracy < MIN_SEPARATION {
-                return Err(FitError::NoSeparation {
+                // Another path to the same evidence may be all the corpus shows (hard
+                // contacts never exercise a slow path): this term keeps the base's numbers
+                // as long as another term of the event separates.
+                notes.push(Note {
+                    event: event.name.clone(),
+                    item: "sensor",
+                    text: format!(
+                        "{}: kept the base's (weight {}): one threshold separates only {:.1} % of this corpus from outside",
+                        term.feature,
+                        term.weight,
+                        accuracy * 100.0
+                    ),
+                });
+                strengths.push(None);
+                unseparated.get_or_insert(FitError::NoSeparation {
                     feature: term.feature.clone(),
                     event: event.name.clone(),
                     threshold: round4(threshold),
@@ -238,6 +256,7 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                     event_median: round4(quantile(&values, 0.5)),
                     outside_median: round4(quantile(&others, 0.5)),
                 });
+                continue;
             }
             let falling = matches!(term.cdf, CdfSpec::Sigmoid { falling: true, .. });
             // What each occurrence reaches: its greatest value (its least, falling).
@@ -262,7 +281,7 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                     weakest = (acc, format!("`{other}`"));
                 }
             }
-            strengths.push(weakest.0 - 0.5);
+            strengths.push(Some(weakest.0 - 0.5));
             notes.push(Note {
                 event: event.name.clone(),
                 item: "sensor",
@@ -275,19 +294,36 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                 ),
             });
         }
-        if strengths.iter().sum::<f64>() > 0.0 && strengths.len() == event.sensor.len() {
-            for (term, w) in event
+        if let Some(err) = unseparated
+            && strengths.iter().all(Option::is_none)
+        {
+            return Err(err);
+        }
+        let fitted: Vec<f64> = strengths.iter().flatten().copied().collect();
+        if fitted.iter().sum::<f64>() > 0.0 && strengths.len() == event.sensor.len() {
+            // The fitted terms share what the kept ones leave of the base's total.
+            let kept: f32 = event
+                .sensor
+                .iter()
+                .zip(&strengths)
+                .filter(|(_, s)| s.is_none())
+                .map(|(t, _)| t.weight)
+                .sum();
+            let mut weights = shares(f64::from(total - kept), &fitted).into_iter();
+            let mut fitted_terms: Vec<&mut detector_build::SensorTerm> = event
                 .sensor
                 .iter_mut()
-                .zip(shares(f64::from(total), &strengths))
-            {
-                term.weight = round4(w);
+                .zip(&strengths)
+                .filter(|(_, s)| s.is_some())
+                .map(|(t, _)| t)
+                .collect();
+            for term in &mut fitted_terms {
+                term.weight = round4(weights.next().unwrap_or(0.0));
             }
             // Rounding may push the sum past the base's: take it off the largest.
-            let excess: f32 = event.sensor.iter().map(|t| t.weight).sum::<f32>() - total;
+            let excess: f32 = fitted_terms.iter().map(|t| t.weight).sum::<f32>() + kept - total;
             if excess > 0.0
-                && let Some(t) = event
-                    .sensor
+                && let Some(t) = fitted_terms
                     .iter_mut()
                     .max_by(|a, b| a.weight.total_cmp(&b.weight))
             {
@@ -1374,6 +1410,76 @@ mod tests {
             &[1.0, 1.0 / 3.0, 2.0 / 3.0]
         ));
         assert!(close(&shares(1.5, &[0.0, 1.0]), &[0.0, 1.0]));
+    }
+
+    /// Two paths to one event, each sufficient: a corpus that shows only one of them fits
+    /// that one and keeps the other as the base has it; a corpus that shows neither stops.
+    #[test]
+    fn a_path_the_corpus_does_not_show_keeps_the_bases_numbers() {
+        let base = Config::from_toml(
+            r#"
+rate_hz = 1000.0
+[[channel]]
+name = "x"
+unit = "N"
+[[channel]]
+name = "y"
+unit = "N"
+[[feature]]
+name = "fast"
+stage = { raw = { input = "x" } }
+[[feature]]
+name = "slow"
+stage = { raw = { input = "y" } }
+[[event]]
+name = "e"
+sensor = [
+    { feature = "fast", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.0 } } },
+    { feature = "slow", weight = 0.75, cdf = { sigmoid = { low = 3.0, high = 4.0 } } },
+]
+alert = { on = 0.55, off = 0.35, hold_ms = 50.0 }
+confirm = { on = 0.75, off = 0.5, hold_ms = 50.0 }
+[[phase]]
+name = "p"
+events = ["e"]
+"#,
+        )
+        .expect("base");
+        let detector = detector_build::build(&base).expect("builds");
+        let mut samples = FeatureSamples::new(&detector);
+        let ramp = |from: f64, n: u32| (0..n).map(move |k| from + f64::from(k) / 10.0);
+        // `fast` rises well above its outside values in every event; `slow` does not move.
+        samples.outside = vec![
+            ramp(0.0, 1000).map(|v| v / 100.0).collect(),
+            vec![0.5; 1000],
+        ];
+        samples.inside[0] = vec![ramp(5.0, 100).collect(), vec![0.5; 100]];
+        samples.peaks[0] = vec![vec![(5.0, 15.0); 10], vec![(0.5, 0.5); 10]];
+        let (fitted, notes) = fit_terms(&base, &samples).expect("one path separates");
+        let [fast, slow] = &fitted.events[0].sensor[..] else {
+            panic!("two terms");
+        };
+        assert_eq!(
+            (slow.weight, slow.cdf),
+            (0.75, base.events[0].sensor[1].cdf)
+        );
+        assert_ne!(fast.cdf, base.events[0].sensor[0].cdf);
+        // The fitted term takes what the kept one leaves of the base's 1.75, capped at 1.
+        assert_eq!(fast.weight, 1.0);
+        assert!(
+            notes
+                .iter()
+                .any(|n| n.text.starts_with("slow: kept the base's (weight 0.75)")),
+            "{notes:?}"
+        );
+        // Neither path shows: the fit stops, naming the first.
+        samples.outside[0] = vec![0.5; 1000];
+        samples.inside[0][0] = vec![0.5; 100];
+        samples.peaks[0][0] = vec![(0.5, 0.5); 10];
+        assert!(matches!(
+            fit_terms(&base, &samples),
+            Err(FitError::NoSeparation { feature, .. }) if feature == "fast"
+        ));
     }
 
     /// A feature saturated in the corpus (±32768) still gives bounds a sigmoid takes.

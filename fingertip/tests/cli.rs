@@ -1016,6 +1016,12 @@ fn fit_writes_a_configuration_that_runs() {
     let toml = std::fs::read_to_string(&fitted).expect("written");
     assert!(toml.starts_with("# Fitted by `fingertip fit`"), "{toml}");
     assert!(toml.contains("# fitted sensor:") && toml.contains("# fitted confirm:"));
+    // Hard contacts never push the force sensor while the structure is quiet: that path
+    // keeps the base's numbers, the film's paths are fitted.
+    assert!(
+        toml.contains("force_push_steady: kept the base's (weight 1)"),
+        "{toml}"
+    );
     // The link collision is not labelled: its numbers are the base's.
     let base = std::fs::read_to_string(format!(
         "{}/../configs/approach.toml",
@@ -1063,14 +1069,15 @@ fn fit_writes_a_configuration_that_runs() {
         assert!(trained.contains(&figure), "{figure} in {trained}");
     }
 
-    // A contact judged by the commanded acceleration alone: it cannot tell contacts apart.
+    // A contact judged by the commanded acceleration alone, on every path: it cannot tell
+    // contacts apart.
     let bad = dir.join("bad.toml");
-    let replaced = base.replacen(
-        "{ feature = \"press_fast_free\", weight = 1.0",
-        "{ feature = \"acc_step\", weight = 1.0",
-        1,
-    );
-    assert_ne!(replaced, base);
+    let mut replaced = base.clone();
+    for path in ["press_fast_free", "press_clear", "force_push_steady"] {
+        let term = format!("{{ feature = \"{path}\", weight = 1.0");
+        assert!(replaced.contains(&term), "{term}");
+        replaced = replaced.replacen(&term, "{ feature = \"acc_step\", weight = 1.0", 1);
+    }
     std::fs::write(&bad, replaced).expect("written");
     let refused = dir.join("refused.toml");
     let out = fingertip(&[

@@ -59,27 +59,31 @@ fn the_good_config_builds() {
     assert!(detector_build::build(&good()).is_ok());
 }
 
-/// Weights may sum to 2 (two terms each sufficient), not beyond.
+/// Weights may sum to 3 (three terms each sufficient), not beyond.
 #[test]
-fn weights_summing_above_two() {
-    let mut either = good();
-    for t in &mut either.events[0].sensor {
-        t.weight = 1.0;
-    }
-    assert!(detector_build::build(&either).is_ok());
+fn weights_summing_above_three() {
+    let each_sufficient = |c: &mut Config| {
+        for t in &mut c.events[0].sensor {
+            t.weight = 1.0;
+        }
+        c.events[0]
+            .sensor
+            .push(sensor("fa", 1.0, sigmoid(0.0, 2.0)));
+    };
+    let mut three = good();
+    each_sufficient(&mut three);
+    assert!(detector_build::build(&three).is_ok());
     let err = reject(
         |c| {
-            for t in &mut c.events[0].sensor {
-                t.weight = 1.0;
-            }
+            each_sufficient(c);
             c.events[0]
                 .sensor
-                .push(sensor("fa", 0.25, sigmoid(0.0, 2.0)));
+                .push(sensor("fb", 0.25, sigmoid(0.0, 2.0)));
         },
-        &["event 'e'", "2.25", "above 2"],
+        &["event 'e'", "3.25", "above 3"],
     );
     assert_eq!(err.item, Item::Event(name("e")));
-    assert!(matches!(err.problem, Problem::WeightSum(s) if (s - 2.25).abs() < 1e-6));
+    assert!(matches!(err.problem, Problem::WeightSum(s) if (s - 3.25).abs() < 1e-6));
 }
 
 #[test]

@@ -19,14 +19,16 @@ fn default_detector() -> Detector {
 
 /// Inputs of tick `k` of a run that has everything a state holds: quiet motion, then a
 /// ramp of force and stress rate, vibration on the force, a position error, commanded
-/// accelerations, and now and then a withheld channel.
+/// accelerations, and now and then a withheld channel. The load is taken off from tick
+/// 1400 to 1900 and put on again, so that levels are raised after every cut.
 fn inputs_at(detector: &Detector, k: u32) -> Inputs {
     let t = f64::from(k) / 5000.0;
     let phase = f64::from(k % 97) / 97.0;
-    let loaded = k > 1200;
+    let load_start = if k > 1900 { 1900 } else { 1200 };
+    let loaded = k > 1200 && !(1400..=1900).contains(&k);
     let si = |name: &str| -> f64 {
         match name {
-            "force_x" if loaded => -0.002 * f64::from(k - 1200) + 0.05 * (t * 700.0).sin(),
+            "force_x" if loaded => -0.002 * f64::from(k - load_start) + 0.05 * (t * 700.0).sin(),
             "force_x" => 0.01 * (t * 300.0).sin(),
             "force_y" => 0.02 * (t * 90.0).cos(),
             "skin_accel" => 3.0 * (t * 2000.0).sin() * phase,
