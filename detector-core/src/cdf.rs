@@ -176,7 +176,8 @@ impl Ramp {
     /// [`Ramp::scaling`], `d · mul` + 2³¹ stays below (2¹⁵ + 1) · 2³² (a narrow ramp's
     /// `mul` errs by at most ½, which `d` < 2¹⁷ turns into less than 2³¹ after the shift; a
     /// wide one's by at most ½ over `d` < 2³²). Every ramp is checked to carry that
-    /// multiplier ([`Ramp::valid`]), so no clamp is needed; a property test holds the bound.
+    /// multiplier ([`Ramp::valid`]), so no clamp is needed; a test checks the last distance
+    /// of every narrow span and of wide ones.
     #[inline(always)]
     fn along(&self, d: u32) -> u32 {
         if d >= self.span {

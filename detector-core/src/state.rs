@@ -496,15 +496,16 @@ pub const fn product(acc: u32, q: u32) -> u32 {
     (acc * q + (1 << 14)) >> 15
 }
 
-/// Eq. 14 from an event's context `product` (Q15) and the sum of its sensor terms'
-/// weight (Q15) × ψ (Q15): product × min(1, Σ w ψ), rounded to nearest. Weights sum to at
+/// Eq. 14 from an event's context `product` (Q15, at most 2¹⁵: [`product`] of confidences
+/// from [`ONE`]) and the sum of its sensor terms' weight (Q15) × ψ (Q15): product ×
+/// min(1, Σ w ψ), rounded to nearest, itself at most 2¹⁵ without a clamp. Weights sum to at
 /// most [`MAX_WEIGHT_SUM_Q15`](crate::MAX_WEIGHT_SUM_Q15) (3 · 2¹⁵ + 3), so the sum stays
 /// below 2³²  − 2¹⁴.
 #[inline(always)]
 pub const fn eq14(product: u32, weighted_sum: u32) -> Confidence {
     let sum = (weighted_sum + (1 << 14)) >> 15;
     let sum = if sum > 1 << 15 { 1 << 15 } else { sum };
-    Confidence::from_bits_clamped((product * sum + (1 << 14)) >> 15)
+    Confidence::from_bits_within_one((product * sum + (1 << 14)) >> 15)
 }
 
 /// Stores channel `c`'s sample from `inputs` in its slot.
