@@ -248,7 +248,7 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                     ),
                 });
                 strengths.push(None);
-                unseparated.get_or_insert(FitError::NoSeparation {
+                unseparated.get_or_insert_with(|| FitError::NoSeparation {
                     feature: term.feature.clone(),
                     event: event.name.clone(),
                     threshold: round4(threshold),
