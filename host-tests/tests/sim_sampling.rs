@@ -352,7 +352,7 @@ fn every_parameter_at_the_ends_of_its_reach_runs() {
         let name = format!("{}.{}", p.group, p.name);
         let scenario = match p.group {
             "soft_object" => Scenario::ContactSoft5,
-            "firm_soft_object" | "braking" => Scenario::ContactBraking,
+            "braking" => Scenario::ContactBraking,
             "very_soft_object" => Scenario::ContactVerySoft1,
             "movable_object" => Scenario::ObjectMoves5,
             "obstacle" => Scenario::LinkCollision8,

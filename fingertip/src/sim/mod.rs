@@ -28,8 +28,8 @@ use engine::{
     Setup, Struck,
 };
 use params::{
-    Braking, Draws, FirmSoftObject, HardObject, Knock, LargeDisturbance, Motion, MovableObject,
-    Obstacle, Plant, Sensors, SmallDisturbance, SoftObject, SuddenAccel, Surface, VerySoftObject,
+    Braking, Draws, HardObject, Knock, LargeDisturbance, Motion, MovableObject, Obstacle, Plant,
+    Sensors, SmallDisturbance, SoftObject, SuddenAccel, Surface, VerySoftObject,
 };
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -213,7 +213,7 @@ pub enum Scenario {
     SuddenAccelStandstill,
     /// A sudden commanded acceleration while moving at 5 cm/s.
     SuddenAccelMoving5,
-    /// Contact with a hard or firm soft object while the finger brakes.
+    /// Contact with a hard or a soft object while the finger brakes.
     ContactBraking,
     /// Contact with a very soft object at 1 cm/s.
     ContactVerySoft1,
@@ -245,7 +245,6 @@ enum Kind {
 enum ObjectKind {
     Hard,
     Soft,
-    FirmSoft,
     VerySoft,
     Movable,
 }
@@ -386,7 +385,7 @@ impl Scenario {
             Scenario::SuddenAccelStandstill => "sudden commanded acceleration from standstill",
             Scenario::SuddenAccelMoving5 => "sudden commanded acceleration while moving at 5 cm/s",
             Scenario::ContactBraking => {
-                "fingertip contacts a hard or firm soft object while braking from 5 cm/s"
+                "fingertip contacts a hard or a soft object while braking from 5 cm/s"
             }
             Scenario::ContactVerySoft1 => "fingertip contacts a very soft object at 1 cm/s",
             Scenario::DisturbanceSlow2 => {
@@ -515,7 +514,7 @@ impl Scenario {
             Kind::Contact(ObjectKind::Hard) => {
                 edges(STIFFNESS, "N/m", true, &[1e4, 2.15e4, 4.64e4, 1e5])
             }
-            Kind::Contact(ObjectKind::Soft | ObjectKind::FirmSoft) => {
+            Kind::Contact(ObjectKind::Soft) => {
                 edges(STIFFNESS, "N/m", true, &[100.0, 300.0, 1000.0, 3000.0])
             }
             Kind::Contact(ObjectKind::VerySoft) => {
@@ -524,7 +523,12 @@ impl Scenario {
             Kind::Contact(ObjectKind::Movable) => {
                 edges("object mass", "kg", true, &[0.05, 0.1, 0.2, 0.5])
             }
-            Kind::BrakingContact => edges(STIFFNESS, "N/m", true, &[1e3, 3e3, 3.16e4, 1e5]),
+            Kind::BrakingContact => edges(
+                STIFFNESS,
+                "N/m",
+                true,
+                &[100.0, 300.0, 1e3, 3e3, 3.16e4, 1e5],
+            ),
             Kind::Collision => categories(
                 "share of the commanded speed the obstacle takes",
                 "1",
@@ -578,11 +582,10 @@ impl Scenario {
         let value = match self.kind() {
             Kind::Contact(ObjectKind::Hard) => param("hard_object.stiffness"),
             Kind::Contact(ObjectKind::Soft) => param("soft_object.stiffness"),
-            Kind::Contact(ObjectKind::FirmSoft) => param("firm_soft_object.stiffness"),
             Kind::Contact(ObjectKind::VerySoft) => param("very_soft_object.stiffness"),
             Kind::Contact(ObjectKind::Movable) => param("movable_object.mass"),
             Kind::BrakingContact => {
-                param("hard_object.stiffness").or_else(|| param("firm_soft_object.stiffness"))
+                param("hard_object.stiffness").or_else(|| param("soft_object.stiffness"))
             }
             // A link 2 obstacle stops the tip: the whole speed.
             Kind::Collision => match trace.meta("struck_link")? {
@@ -1044,12 +1047,9 @@ fn approach_scene(
             let object = if hard {
                 ObjectKind::Hard
             } else {
-                ObjectKind::FirmSoft
+                ObjectKind::Soft
             };
-            meta.push((
-                "object".into(),
-                if hard { "hard" } else { "firm_soft" }.into(),
-            ));
+            meta.push(("object".into(), if hard { "hard" } else { "soft" }.into()));
             meta.push(("brake_onset_s".into(), fmt_f64(start as f64 * period)));
             scene.object = Some(contact_object(object, reach, prng, r, values));
             scene.scheduled_onset = Some(contact as f64 * period);
@@ -1154,11 +1154,6 @@ fn contact_object(
         }
         ObjectKind::Soft => {
             let o = SoftObject::choose(prng, r);
-            values.extend(o.values());
-            (linear(o.stiffness), o.damping, None)
-        }
-        ObjectKind::FirmSoft => {
-            let o = FirmSoftObject::choose(prng, r);
             values.extend(o.values());
             (linear(o.stiffness), o.damping, None)
         }

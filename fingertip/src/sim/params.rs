@@ -503,17 +503,6 @@ param_group! {
 }
 
 param_group! {
-    /// A firm soft object: the stiffer part of the soft ones (a firm sponge, a fruit), for
-    /// contacts while braking.
-    struct FirmSoftObject, group "firm_soft_object" {
-        /// Contact stiffness.
-        stiffness: "N/m" = 2000.0, [1000.0, 3000.0] log;
-        /// Hunt-Crossley damping.
-        damping: "s/m" = 40.0, [20.0, 80.0];
-    }
-}
-
-param_group! {
     /// A very soft object (open-cell foam, a ripe fruit's skin), touched slowly: the force
     /// builds at only stiffness x speed (0.4 to 1.2 N/s at 1 cm/s).
     struct VerySoftObject, group "very_soft_object" {
@@ -529,8 +518,9 @@ param_group! {
     /// commanded velocity falls at a constant deceleration from `motion.onset` on (until
     /// the finger would stop), and the object's surface is where the command is a chosen
     /// fraction of that stopping time later. Randomized runs touch a hard object or a
-    /// firm soft one (the `hard_object` or `firm_soft_object` ranges), equally likely;
-    /// nominal runs a hard one.
+    /// soft one (the `hard_object` or `soft_object` ranges), equally likely; nominal runs
+    /// a hard one. On a soft object the finger comes to rest pressing it by what the
+    /// command still travels, a few cN on the softest.
     struct Braking, group "braking" {
         /// The commanded deceleration.
         deceleration: "m/s^2" = 0.6, [0.3, 1.0];
@@ -688,7 +678,6 @@ pub fn all_specs() -> Vec<ParamSpec> {
         HardObject::SPECS,
         Surface::SPECS,
         SoftObject::SPECS,
-        FirmSoftObject::SPECS,
         VerySoftObject::SPECS,
         Braking::SPECS,
         MovableObject::SPECS,
