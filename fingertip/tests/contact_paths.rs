@@ -2,12 +2,14 @@
 //! soft object at 1 cm/s on a film whose amplifier is AC-coupled: the film reads the
 //! steady loading as a rate that dies away, and the contact is found on the force sensor
 //! (the paper's "filtered force", `force_push_steady`). Without that path the film's
-//! paths alone miss some of the same runs.
+//! paths alone miss some of the same runs. And a finger braking onto a soft object: its
+//! film is held only to the jerk its braking can read, which pulls the skin off the film.
 
 use detector_build::Config;
 use detector_core::Detector;
-use fingertip::score::classify;
+use fingertip::score::{Outcome, classify};
 use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
@@ -17,10 +19,9 @@ fn detector(toml: &str) -> Detector {
     detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
 }
 
-/// Which of the randomized very soft contacts on seeds `seeds`, with the film AC-coupled
-/// at `film_highpass_hz`, `detector` gets right.
-fn right(detector: &Detector, seeds: std::ops::Range<u64>, film_highpass_hz: f64) -> Vec<bool> {
-    let s = Scenario::ContactVerySoft1;
+/// The randomized runs of scenario `s` on seeds `seeds`, with the film AC-coupled at
+/// `film_highpass_hz`.
+fn runs(s: Scenario, seeds: std::ops::Range<u64>, film_highpass_hz: f64) -> Vec<Trace> {
     seeds
         .map(|seed| {
             let opts = SimOptions {
@@ -29,11 +30,37 @@ fn right(detector: &Detector, seeds: std::ops::Range<u64>, film_highpass_hz: f64
                 film_highpass_hz,
                 ..SimOptions::default()
             };
-            let tr = sim::simulate(&s, &opts).expect("simulates");
-            let (on, _) = tr.truth_onset().expect("an event");
-            let decisions = replay::replay(detector, &tr, |_, _, _| {}).expect("replays");
-            classify(s.expected().map(|e| (e, tr.time()[on])), &decisions).is_right()
+            sim::simulate(&s, &opts).expect("simulates")
         })
+        .collect()
+}
+
+/// What `detector` makes of each of `traces` (runs of `s`).
+fn outcomes(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<Outcome> {
+    traces
+        .iter()
+        .map(|tr| {
+            let (on, _) = tr.truth_onset().expect("an event");
+            let decisions = replay::replay(detector, tr, |_, _, _| {}).expect("replays");
+            classify(s.expected().map(|e| (e, tr.time()[on])), &decisions)
+        })
+        .collect()
+}
+
+/// Whether `detector` gets each of `traces` (runs of `s`) right.
+fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
+    outcomes(detector, s, traces)
+        .iter()
+        .map(Outcome::is_right)
+        .collect()
+}
+
+/// The seeds of the runs in `right` that were not right.
+fn wrong(seeds: std::ops::Range<u64>, right: &[bool]) -> Vec<u64> {
+    seeds
+        .zip(right)
+        .filter(|(_, r)| !**r)
+        .map(|(s, _)| s)
         .collect()
 }
 
@@ -45,18 +72,15 @@ fn an_ac_coupled_film_leaves_very_soft_contacts_to_the_force_sensor() {
     );
     let film_only = detector(&APPROACH_TOML.replacen(FORCE_TERM, "", 1));
     let default = detector(APPROACH_TOML);
+    let s = Scenario::ContactVerySoft1;
     let seeds = 1..41;
-    let with_force = right(&default, seeds.clone(), 2.0);
-    let film_alone = right(&film_only, seeds.clone(), 2.0);
+    let coupled = runs(s, seeds.clone(), 2.0);
+    let with_force = right(&default, s, &coupled);
+    let film_alone = right(&film_only, s, &coupled);
     assert!(
         with_force.iter().all(|&r| r),
         "the default misses very soft contacts on seeds {:?}",
-        seeds
-            .clone()
-            .zip(&with_force)
-            .filter(|(_, r)| !**r)
-            .map(|(s, _)| s)
-            .collect::<Vec<_>>()
+        wrong(seeds.clone(), &with_force)
     );
     let missed = film_alone.iter().filter(|&&r| !r).count();
     assert!(
@@ -65,5 +89,51 @@ fn an_ac_coupled_film_leaves_very_soft_contacts_to_the_force_sensor() {
         film_alone.len()
     );
     // On a film without coupling (the envelope's), the default finds them too.
-    assert!(right(&default, seeds, 0.0).iter().all(|&r| r));
+    assert!(right(&default, s, &runs(s, seeds, 0.0)).iter().all(|&r| r));
+}
+
+/// The bound the default holds the film's slow path to, as written in
+/// `configs/approach.toml`: the skin's jerk towards the pad, measured and commanded.
+const PAD_BOUND: &str = "stage = { difference = { a = \"push\", b = \"pad_ring\", gain = -50.0 } }";
+
+#[test]
+fn a_braking_finger_finds_soft_objects_on_its_film() {
+    assert!(
+        APPROACH_TOML.contains(PAD_BOUND),
+        "the default's film bound"
+    );
+    // The same bound for any step of the commanded acceleration, whichever its sign.
+    let either_sign = detector(&APPROACH_TOML.replacen(
+        PAD_BOUND,
+        &PAD_BOUND.replace("pad_ring", "motion_ring"),
+        1,
+    ));
+    let default = detector(APPROACH_TOML);
+    let s = Scenario::ContactBraking;
+    // Half the runs touch a hard object; of the soft ones, the softest third.
+    let seeds = 1..241;
+    let soft: Vec<Trace> = runs(s, seeds, 0.0)
+        .into_iter()
+        .filter(|tr| {
+            tr.meta("object") == Some("soft")
+                && tr
+                    .meta("param.soft_object.stiffness")
+                    .and_then(|k| k.parse::<f64>().ok())
+                    .is_some_and(|k| k < 300.0)
+        })
+        .collect();
+    assert!(soft.len() >= 30, "{} runs on soft objects", soft.len());
+    // Found within the paper's 20 ms.
+    let late = |d: &Detector| {
+        outcomes(d, s, &soft)
+            .iter()
+            .filter(|o| !matches!(o, Outcome::Correct { latency_s } if *latency_s <= 0.020))
+            .count()
+    };
+    assert_eq!(late(&default), 0, "the default finds braking contacts late");
+    assert!(
+        late(&either_sign) > 0,
+        "a bound of either sign finds all {} within 20 ms too: the test no longer shows the sign's part",
+        soft.len()
+    );
 }
