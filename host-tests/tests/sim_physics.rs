@@ -833,3 +833,42 @@ fn padded_tip_rings_at_its_suspension_mode() {
     }
     assert!(checked >= 5, "{checked} padded tips");
 }
+
+/// An obstacle that gives way is the collision's twin: every channel reads the same, bit for
+/// bit, until it gives way, then the freed finger reads otherwise within a millisecond; the
+/// trace records how long it held and how hard it pushed. It is refused outside 0 to 1 s.
+#[test]
+fn an_obstacle_that_gives_way_is_the_collision_until_then() {
+    for (s, seed) in [(Scenario::LinkCollision8, 3), (Scenario::LinkCollision2, 4)] {
+        let held = run(s, seed, true);
+        let opts = |after: f64| SimOptions {
+            seed,
+            randomize: true,
+            obstacle_gives_way_s: Some(after),
+            ..SimOptions::default()
+        };
+        let freed = sim::simulate(&s, &opts(0.002)).expect("valid options");
+        let on = onset_row(&held);
+        let until = on + 2 * MS;
+        let differs = |k: usize| {
+            sim::CHANNELS
+                .iter()
+                .any(|c| col(&held, c.name)[k] != col(&freed, c.name)[k])
+        };
+        assert!(!(0..until).any(differs), "{s:?}: parted before it gave way");
+        assert!(
+            (until..until + MS).any(differs),
+            "{s:?}: still the same 1 ms after"
+        );
+        assert_eq!(freed.meta("obstacle_gives_way_s"), Some("0.002"));
+        let peak: f64 = freed
+            .meta("obstacle_peak_force_n")
+            .and_then(|v| v.parse().ok())
+            .expect("the peak force");
+        assert!(peak > 0.1 && peak < 100.0, "{s:?}: {peak} N");
+        assert!(held.meta("obstacle_gives_way_s").is_none());
+        for bad in [-0.001, 1.5, f64::NAN] {
+            assert!(sim::simulate(&s, &opts(bad)).is_err(), "{bad}");
+        }
+    }
+}

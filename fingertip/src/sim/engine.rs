@@ -310,6 +310,9 @@ pub(crate) struct Setup {
     pub encoder_resolution: f64,
     /// The corner of the stress-rate film's AC coupling (Hz); 0: none.
     pub film_highpass_hz: f64,
+    /// How long after the struck body first touches it the obstacle gives way (s): from
+    /// then on it pushes no more.
+    pub obstacle_gives_way_s: Option<f64>,
 }
 
 /// What the physical event was.
@@ -325,6 +328,8 @@ pub(crate) struct Output {
     pub channels: Vec<Vec<f64>>,
     /// The first integration step at which an event force was non-zero.
     pub onset: Option<(u64, Happened)>,
+    /// The largest force the obstacle pushed with (N; 0 without one).
+    pub obstacle_peak: f64,
 }
 
 /// The stiffest mode of a run's mechanics (rad/s) and the internal rate (Hz) it needs:
@@ -884,23 +889,37 @@ struct Obstacle<'a> {
     setup: &'a ObstacleSetup,
     /// Its position in the struck body's coordinates.
     position: f64,
+    /// For an obstacle that gives way: how long after the first touch (s), and when that
+    /// touch was, once it has happened.
+    gives_way: Option<(f64, Option<f64>)>,
 }
 
 impl Obstacle<'_> {
-    /// The force pushing the struck body back along the wall's normal, from its position
-    /// and velocity.
-    fn force(&self, b: &Bodies) -> f64 {
+    /// The force pushing the struck body back along the wall's normal at time `t`, from
+    /// its position and velocity (called once per step, in order).
+    fn force(&mut self, b: &Bodies, t: f64) -> f64 {
+        if let Some((after, Some(touch))) = self.gives_way
+            && t >= touch + after
+        {
+            return 0.0;
+        }
         let n = self.setup.normal;
         let (x, v) = match self.setup.body {
             Struck::Link1 => (dot(n, b.xa), dot(n, b.va)),
             _ => (dot(n, b.xd), dot(n, b.vd)),
         };
-        hunt_crossley(
+        let f = hunt_crossley(
             self.setup.stiffness,
             self.setup.damping,
             x - self.position,
             v,
-        )
+        );
+        if let Some((_, touch @ None)) = &mut self.gives_way
+            && f > 0.0
+        {
+            *touch = Some(t);
+        }
+        f
     }
 }
 
@@ -1272,9 +1291,10 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         .message(0, &mut setup.trajectory, &b)
         .map(round_context);
     let mut contact = setup.object.as_ref().map(|o| Contact::new(o, b.xs, dt));
-    let obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
+    let mut obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
         setup: o,
         position: o.position + dot(o.normal, start),
+        gives_way: setup.obstacle_gives_way_s.map(|after| (after, None)),
     });
     let mut disturbance = setup.disturbance.as_ref().map(|d| Disturbance::new(d, dt));
     let (inv_ma, inv_md, ms) = (chain.arm_inv_mass, 1.0 / chain.distal_mass, chain.skin_mass);
@@ -1282,6 +1302,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let carrier = p.carrier_mass;
 
     let mut onset: Option<(u64, Happened)> = None;
+    let mut obstacle_peak = 0.0f64;
     let mut out: Vec<Vec<f64>> = (0..CHANNELS.len())
         .map(|_| Vec::with_capacity(setup.rows))
         .collect();
@@ -1310,9 +1331,9 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
             }
             None => [0.0; 2],
         };
-        let f_ob = match obstacle.as_ref() {
+        let f_ob = match obstacle.as_mut() {
             Some(o) => {
-                let f = o.force(&b);
+                let f = o.force(&b, t);
                 let on = match o.setup.body {
                     Struck::Link1 => &mut on_arm,
                     _ => &mut on_distal,
@@ -1350,6 +1371,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
             None => (0.0, 0.0, [1.0, 0.0], [0.0, 1.0]),
         };
         let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) * inv_ms);
+        obstacle_peak = obstacle_peak.max(f_ob);
         if onset.is_none() {
             onset = event(f_n, f_ob, f_d).map(|h| (i, h));
         }
@@ -1385,6 +1407,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     Output {
         channels: out,
         onset,
+        obstacle_peak,
     }
 }
 
@@ -1757,6 +1780,7 @@ mod tests {
             context_rate_hz: 1000.0,
             encoder_resolution: ENCODER_RESOLUTION,
             film_highpass_hz: 0.0,
+            obstacle_gives_way_s: None,
         };
         let mut noise = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
         let out = run(&mut setup, &mut noise);

@@ -691,6 +691,15 @@ pub struct SimOptions {
     /// or object's range, or beyond the envelope. Each is recorded in the trace as
     /// `range.GROUP.NAME`; a non-randomized run refuses them.
     pub ranges: Vec<ParamRange>,
+    /// For a link collision: the obstacle gives way this long after the link first
+    /// touches it (s, 0 to 1), and pushes no more, as a light object knocked aside or a
+    /// hand that lets go would. The run is then the collision's twin: the same readings,
+    /// bit for bit, until it gives way, and a finger set free after a blow of that length
+    /// from then on. It tells how soon any detector can tell a collision from a blow (the
+    /// `twins` example). The trace records it and the largest force the obstacle pushed
+    /// with (`obstacle_gives_way_s`, `obstacle_peak_force_n`), and keeps the collision's
+    /// labels.
+    pub obstacle_gives_way_s: Option<f64>,
 }
 
 impl SimOptions {
@@ -717,6 +726,7 @@ impl Default for SimOptions {
             encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
             film_highpass_hz: 0.0,
             ranges: Vec::new(),
+            obstacle_gives_way_s: None,
         }
     }
 }
@@ -844,6 +854,9 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         MAX_FILM_HIGHPASS_HZ,
         "0 to 10 Hz",
     )?;
+    if let Some(after) = opts.obstacle_gives_way_s {
+        check("obstacle_gives_way_s", after, 0.0, 1.0, "0 to 1 s")?;
+    }
     if let Some(r) = opts.ranges.first().filter(|_| !opts.randomize) {
         return Err(SimError::BadRange(format!(
             "{r}: a run with the nominal parameters draws none"
@@ -896,6 +909,9 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         "stiffest_mode_hz".into(),
         fmt_f64(stiffest / std::f64::consts::TAU),
     ));
+    let gives_way = opts
+        .obstacle_gives_way_s
+        .filter(|_| scene.obstacle.is_some());
     let mut setup = Setup {
         plant,
         sensors,
@@ -909,8 +925,13 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         context_rate_hz: opts.controller_rate_hz,
         encoder_resolution: opts.encoder_resolution_um / 1e6,
         film_highpass_hz: opts.film_highpass_hz,
+        obstacle_gives_way_s: gives_way,
     };
     let out = engine::run(&mut setup, &mut noise);
+    if let Some(after) = gives_way {
+        meta.push(("obstacle_gives_way_s".into(), fmt_f64(after)));
+        meta.push(("obstacle_peak_force_n".into(), fmt_f64(out.obstacle_peak)));
+    }
 
     let t: Vec<f64> = (0..rows).map(|k| k as f64 / opts.rate_hz).collect();
     // The onset's time on the rows' clock, and the first row sampled at or after it (the

@@ -1,0 +1,154 @@
+//! How soon after its onset any detector can tell a link collision from a blow on the link:
+//! `cargo run --release -p fingertip --example twins [RUNS] [BASE_SEED]`.
+//!
+//! Each link collision (at 8 and at 2 cm/s) is run again with the same seed, so with the
+//! same arm, sensors, motion and noise, but with an obstacle that gives way `g` ms after the
+//! link first touches it (`SimOptions::obstacle_gives_way_s`): a blow on the link of the
+//! collision's own force, `g` ms long, after which the finger is free. Until it gives way
+//! the two runs' readings are the same bit for bit, so every causal detector decides the
+//! same in both: one that confirms the collision by then confirms it on the blow too, and
+//! a blow is a disturbance. For each `g`, over all runs:
+//! - how long after the onset the ten channels stay identical (the first row where any
+//!   differs);
+//! - how many of those blows are, in force and length, taps of the envelope (peaks of 1-15
+//!   N, 0.5-3 ms on a link: `large_disturbance`, `small_disturbance` and `knock`), a
+//!   half-sine there where the blow has the collision's shape;
+//! - what the default detector confirms on the blow, and on how many of the collisions it
+//!   confirmed the collision before the readings part (it then confirms it on the blow).
+
+mod seeds;
+
+use detector_core::Detector;
+use fingertip::APPROACH_TOML;
+use fingertip::replay::{self, DecisionRecord};
+use fingertip::sim::{self, CHANNELS, Scenario, SimOptions};
+use fingertip::trace::Trace;
+use rayon::prelude::*;
+
+/// How long after the first touch the obstacle gives way (ms).
+const GIVE_WAY_MS: [f64; 6] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0];
+
+/// The envelope's taps: peak force (N) and length (s), on any body.
+const TAP_PEAK_N: (f64, f64) = (1.0, 15.0);
+const TAP_LENGTH_S: (f64, f64) = (0.0005, 0.003);
+
+/// The first confirmation and its time (s), if any.
+fn first_confirmation(decisions: &[DecisionRecord]) -> Option<(&str, f64)> {
+    decisions
+        .iter()
+        .find(|d| d.is_confirm())
+        .map(|d| (d.event.as_str(), d.t_s))
+}
+
+/// One collision and its twin for one give-way time.
+struct Pair {
+    /// How long after the onset the channels stay identical (s).
+    identical_s: f64,
+    /// The blow's peak force is a tap's, and its length too.
+    tap_sized: bool,
+    /// The event the detector confirms first on the blow.
+    on_blow: Option<String>,
+    /// The detector confirmed the collision before the readings parted.
+    collision_before_parting: bool,
+}
+
+fn simulate(s: Scenario, seed: u64, gives_way_s: Option<f64>) -> Option<Trace> {
+    let opts = SimOptions {
+        seed,
+        randomize: true,
+        obstacle_gives_way_s: gives_way_s,
+        ..SimOptions::default()
+    };
+    sim::simulate(&s, &opts).ok()
+}
+
+fn pair(detector: &Detector, s: Scenario, seed: u64, collision: &Trace, g_s: f64) -> Option<Pair> {
+    let blow = simulate(s, seed, Some(g_s))?;
+    let (on, _) = collision.truth_onset()?;
+    let onset_s: f64 = collision.meta("onset_s")?.parse().ok()?;
+    let columns = |tr: &Trace| -> Option<Vec<Vec<f64>>> {
+        CHANNELS
+            .iter()
+            .map(|c| tr.column(c.name).map(<[f64]>::to_vec))
+            .collect()
+    };
+    let (a, b) = (columns(collision)?, columns(&blow)?);
+    let parted = (on..collision.len())
+        .find(|&k| a.iter().zip(&b).any(|(x, y)| x[k] != y[k]))
+        .unwrap_or(collision.len());
+    let parted_s = collision.time()[parted.min(collision.len() - 1)];
+    let peak: f64 = blow.meta("obstacle_peak_force_n")?.parse().ok()?;
+    let held = replay::replay(detector, collision, |_, _, _| {}).ok()?;
+    let freed = replay::replay(detector, &blow, |_, _, _| {}).ok()?;
+    Some(Pair {
+        identical_s: parted_s - onset_s,
+        tap_sized: (TAP_PEAK_N.0..=TAP_PEAK_N.1).contains(&peak)
+            && (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s),
+        on_blow: first_confirmation(&freed).map(|(e, _)| e.to_string()),
+        collision_before_parting: first_confirmation(&held)
+            .is_some_and(|(e, t)| e == "link_collision" && t < parted_s),
+    })
+}
+
+/// The `q` quantile of `v` (sorted in place), 0 for none.
+fn quantile(v: &mut [f64], q: f64) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(((v.len().saturating_sub(1)) as f64 * q).round() as usize)
+        .copied()
+        .unwrap_or(0.0)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let (runs, base) = seeds::runs_and_base(500)?;
+    let detector = detector_build::build(&detector_build::Config::from_toml(APPROACH_TOML)?)?;
+    let jobs: Vec<(Scenario, u64)> = [Scenario::LinkCollision8, Scenario::LinkCollision2]
+        .into_iter()
+        .flat_map(|s| (base..base + runs).map(move |seed| (s, seed)))
+        .collect();
+    let pairs: Vec<(Scenario, Vec<Pair>)> = jobs
+        .into_par_iter()
+        .filter_map(|(s, seed)| {
+            let collision = simulate(s, seed, None)?;
+            let at: Option<Vec<Pair>> = GIVE_WAY_MS
+                .iter()
+                .map(|g| pair(&detector, s, seed, &collision, g / 1000.0))
+                .collect();
+            Some((s, at?))
+        })
+        .collect();
+    for s in [Scenario::LinkCollision8, Scenario::LinkCollision2] {
+        let of: Vec<&Vec<Pair>> = pairs
+            .iter()
+            .filter(|(t, _)| *t == s)
+            .map(|(_, p)| p)
+            .collect();
+        println!(
+            "{} ({} runs, seeds {base}..{}), each against the same run with an obstacle that gives way:",
+            s.name(),
+            of.len(),
+            base + runs - 1
+        );
+        println!(
+            "  gives way | identical for [ms]: min / 10 % / median | tap-sized blows | the default on the blow: collision / disturbance / nothing | collisions it confirmed before the readings part"
+        );
+        for (i, g) in GIVE_WAY_MS.iter().enumerate() {
+            let at: Vec<&Pair> = of.iter().map(|p| &p[i]).collect();
+            let mut identical: Vec<f64> = at.iter().map(|p| 1000.0 * p.identical_s).collect();
+            let count = |f: &dyn Fn(&Pair) -> bool| at.iter().filter(|p| f(p)).count();
+            let on = |e: Option<&str>| count(&|p: &Pair| p.on_blow.as_deref() == e);
+            let tap_sized = count(&|p: &Pair| p.tap_sized);
+            println!(
+                "  {g:>6} ms | {:>5.1} / {:>4.1} / {:>4.1} | {tap_sized:>4} ({:>4.1} %) | {:>4} / {:>4} / {:>4} | {:>4}",
+                quantile(&mut identical, 0.0),
+                quantile(&mut identical, 0.1),
+                quantile(&mut identical, 0.5),
+                100.0 * tap_sized as f64 / at.len().max(1) as f64,
+                on(Some("link_collision")),
+                on(Some("disturbance")),
+                on(None),
+                count(&|p: &Pair| p.collision_before_parting),
+            );
+        }
+    }
+    Ok(())
+}
