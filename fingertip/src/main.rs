@@ -80,6 +80,12 @@ enum Command {
             requires = "randomize"
         )]
         ranges: Vec<sim::ParamRange>,
+        /// For a link collision: the obstacle gives way this long after the link first
+        /// touches it (ms, 0 to 1,000), and the run becomes a blow of the collision's own
+        /// force, read the same bit for bit until then (its labels stay the collision's;
+        /// `--example twins`).
+        #[arg(long)]
+        obstacle_gives_way_ms: Option<f64>,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -440,6 +446,7 @@ fn run(cli: Cli) -> Result<()> {
             encoder_um,
             film_highpass_hz,
             ranges,
+            obstacle_gives_way_ms,
             out,
         } => simulate(
             &scenario,
@@ -452,6 +459,7 @@ fn run(cli: Cli) -> Result<()> {
                 encoder_resolution_um: encoder_um,
                 film_highpass_hz,
                 ranges,
+                obstacle_gives_way_s: obstacle_gives_way_ms.map(|ms| ms / 1000.0),
                 ..SimOptions::default()
             },
             out.as_deref(),

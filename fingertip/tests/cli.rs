@@ -1519,3 +1519,40 @@ fn a_flight_recording_replays_from_its_saved_state() {
         "{stderr}"
     );
 }
+
+/// `simulate --obstacle-gives-way-ms` writes a link collision's twin (a blow of the
+/// collision's own force that reads as the collision until it lets go), says so in the
+/// trace, and refuses a time outside 0 to 1,000 ms naming the option, writing nothing.
+#[test]
+fn simulate_writes_a_collisions_twin() {
+    let dir = scratch("twin");
+    let trace = dir.join("twin.csv");
+    let path = trace.to_str().expect("utf-8");
+    let ok = fingertip(&[
+        "simulate",
+        "link_collision_8",
+        "--obstacle-gives-way-ms",
+        "2",
+        "--out",
+        path,
+    ]);
+    assert!(ok.status.success(), "{}", text(&ok.stderr));
+    let written = std::fs::read_to_string(&trace).expect("trace");
+    assert!(written.contains("# obstacle_gives_way_s: 0.002\n"));
+    assert!(written.contains("# obstacle_peak_force_n: "));
+    std::fs::remove_file(&trace).expect("removed");
+    let bad = fingertip(&[
+        "simulate",
+        "link_collision_8",
+        "--obstacle-gives-way-ms=2000",
+        "--out",
+        path,
+    ]);
+    assert!(!bad.status.success());
+    assert!(
+        text(&bad.stderr).contains("obstacle_gives_way_s"),
+        "{}",
+        text(&bad.stderr)
+    );
+    assert!(!trace.exists());
+}
