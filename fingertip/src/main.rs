@@ -71,6 +71,11 @@ enum Command {
         /// as a rate that dies away.
         #[arg(long, default_value_t = 0.0)]
         film_highpass_hz: f64,
+        /// The frame the controller reports its context in, turned by this angle from the
+        /// pad's (degrees, -90 to 90; the protocol's and the envelope's is 0): a run from a
+        /// controller whose pad frame is off, or that reports in a fixed task frame.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        context_turned_deg: f64,
         /// With --randomize: draw a parameter from another range than the envelope's,
         /// `group.name=min..max` as docs/simulator.md names it (e.g.
         /// `plant.control_bandwidth=10..15`); may be repeated.
@@ -277,7 +282,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "film_highpass_hz", "ranges"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "film_highpass_hz", "context_turned_deg", "ranges"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -310,6 +315,12 @@ enum Command {
         /// steady rate of loading as a rate that dies away over 1 / (2 pi f) s.
         #[arg(long, default_value_t = 0.0)]
         film_highpass_hz: f64,
+        /// The frame the controller reports its context in, turned by this angle from the
+        /// pad's (degrees, -90 to 90; the protocol's and the envelope's is 0): how the
+        /// detectors fare on a controller whose model of the pad's orientation is off, or
+        /// that reports in a task frame the pad turns away from.
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        context_turned_deg: f64,
         /// Draw a parameter from another range than the envelope's, `group.name=min..max`
         /// as docs/simulator.md names it: how the detectors fare on one arm's range (e.g.
         /// `plant.control_bandwidth=10..15`, the slow loops) or beyond the envelope; may be
@@ -445,6 +456,7 @@ fn run(cli: Cli) -> Result<()> {
             noise_factor,
             encoder_um,
             film_highpass_hz,
+            context_turned_deg,
             ranges,
             obstacle_gives_way_ms,
             out,
@@ -458,6 +470,7 @@ fn run(cli: Cli) -> Result<()> {
                 noise_factor,
                 encoder_resolution_um: encoder_um,
                 film_highpass_hz,
+                context_turned_deg,
                 ranges,
                 obstacle_gives_way_s: obstacle_gives_way_ms.map(|ms| ms / 1000.0),
                 ..SimOptions::default()
@@ -595,6 +608,7 @@ fn run(cli: Cli) -> Result<()> {
             noise_factor,
             encoder_um,
             film_highpass_hz,
+            context_turned_deg,
             ranges,
             json,
             plot_bins,
@@ -608,6 +622,7 @@ fn run(cli: Cli) -> Result<()> {
                 noise_factor,
                 encoder_um,
                 film_highpass_hz,
+                context_turned_deg,
                 ranges,
             },
             &config,
@@ -1584,6 +1599,9 @@ struct Plan {
     encoder_um: f64,
     /// The film's AC coupling, Hz ([`SimOptions::film_highpass_hz`]).
     film_highpass_hz: f64,
+    /// The context's frame, turned from the pad's, degrees
+    /// ([`SimOptions::context_turned_deg`]).
+    context_turned_deg: f64,
     /// Parameters drawn from other ranges than the envelope's ([`SimOptions::ranges`]).
     ranges: Vec<sim::ParamRange>,
 }
@@ -1601,6 +1619,9 @@ impl Plan {
         }
         if self.film_highpass_hz > 0.0 {
             flags += &format!(" --film-highpass-hz {}", self.film_highpass_hz);
+        }
+        if self.context_turned_deg != 0.0 {
+            flags += &format!(" --context-turned-deg={}", self.context_turned_deg);
         }
         for r in &self.ranges {
             flags += &format!(" --range {r}");
@@ -1686,6 +1707,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         noise_factor: plan.noise_factor,
         encoder_resolution_um: plan.encoder_um,
         film_highpass_hz: plan.film_highpass_hz,
+        context_turned_deg: plan.context_turned_deg,
         ranges: plan.ranges.clone(),
         ..SimOptions::default()
     };
@@ -2009,6 +2031,7 @@ fn evaluate(
         noise_factor,
         encoder_um,
         film_highpass_hz,
+        context_turned_deg,
         ref ranges,
     } = plan;
     let (detectors, names) = load_detectors(configs)?;
@@ -2059,6 +2082,14 @@ fn evaluate(
             sim::MAX_FILM_HIGHPASS_HZ
         );
     }
+    if !(context_turned_deg.is_finite() && context_turned_deg.abs() <= sim::MAX_CONTEXT_TURNED_DEG)
+    {
+        bail!(
+            "--context-turned-deg = {} must be within -{max}..={max} degrees",
+            fingertip::readable(context_turned_deg),
+            max = sim::MAX_CONTEXT_TURNED_DEG
+        );
+    }
     for r in ranges {
         r.check().map_err(|e| anyhow!("--range {e}"))?;
     }
@@ -2085,6 +2116,10 @@ fn evaluate(
     }
     if film_highpass_hz > 0.0 {
         conditions += &format!(", the film AC-coupled at {film_highpass_hz} Hz");
+    }
+    if context_turned_deg != 0.0 {
+        conditions +=
+            &format!(", the context in a frame turned {context_turned_deg} degrees from the pad's");
     }
     for r in ranges {
         conditions += &format!(", {} drawn from {} .. {}", r.name, r.min, r.max);
@@ -2114,6 +2149,7 @@ fn evaluate(
             "noise_factor": noise_factor,
             "encoder_um": encoder_um,
             "film_highpass_hz": film_highpass_hz,
+            "context_turned_deg": context_turned_deg,
             "ranges": ranges
                 .iter()
                 .map(|r| serde_json::json!({ "parameter": r.name, "min": r.min, "max": r.max }))

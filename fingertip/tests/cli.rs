@@ -649,6 +649,10 @@ fn evaluate_bounds_its_counts() {
         ),
         (["--film-highpass-hz", "20"], "--film-highpass-hz = 20"),
         (
+            ["--context-turned-deg=-95", "--runs=1"],
+            "--context-turned-deg = -95",
+        ),
+        (
             ["--range", "plant.arm_mass=1..50"],
             "--range plant.arm_mass=1..50: the bounds must stay",
         ),
@@ -727,6 +731,8 @@ fn evaluate_runs_beyond_the_envelope() {
         "5",
         "--film-highpass-hz",
         "1.5",
+        "--context-turned-deg",
+        "-10",
         "--range",
         "plant.control_bandwidth=10..12",
         "--range",
@@ -739,7 +745,7 @@ fn evaluate_runs_beyond_the_envelope() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let stdout = text(&out.stdout);
     assert!(
-        stdout.contains("sensor noise 3 times the drawn, encoders resolving 5 um at the tip, the film AC-coupled at 1.5 Hz, plant.control_bandwidth drawn from 10 .. 12, plant.arm_mass drawn from 0.6 .. 0.7"),
+        stdout.contains("sensor noise 3 times the drawn, encoders resolving 5 um at the tip, the film AC-coupled at 1.5 Hz, the context in a frame turned -10 degrees from the pad's, plant.control_bandwidth drawn from 10 .. 12, plant.arm_mass drawn from 0.6 .. 0.7"),
         "{stdout}"
     );
     let report: serde_json::Value =
@@ -747,12 +753,13 @@ fn evaluate_runs_beyond_the_envelope() {
     assert_eq!(report["noise_factor"], 3.0);
     assert_eq!(report["encoder_um"], 5.0);
     assert_eq!(report["film_highpass_hz"], 1.5);
+    assert_eq!(report["context_turned_deg"], -10.0);
     assert_eq!(report["ranges"][0]["parameter"], "plant.control_bandwidth");
     assert_eq!(report["ranges"][1]["min"], 0.6);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
     let (line, csv) = rerun_first_failure(&stdout, &dir);
     assert!(
-        line.contains(" --noise-factor 3 --encoder-um 5 --film-highpass-hz 1.5 --range plant.control_bandwidth=10..12 --range plant.arm_mass=0.6..0.7:"),
+        line.contains(" --noise-factor 3 --encoder-um 5 --film-highpass-hz 1.5 --context-turned-deg=-10 --range plant.control_bandwidth=10..12 --range plant.arm_mass=0.6..0.7:"),
         "{line}"
     );
     assert!(
@@ -779,6 +786,11 @@ fn evaluate_runs_beyond_the_envelope() {
         &csv[..400]
     );
     assert!(csv.contains("# film_highpass_hz: 1.5\n"), "{}", &csv[..400]);
+    assert!(
+        csv.contains("# context_turned_deg: -10\n"),
+        "{}",
+        &csv[..400]
+    );
 }
 
 /// `evaluate --traces` on a directory of recordings: every `*.csv` under it (hidden files

@@ -872,3 +872,46 @@ fn an_obstacle_that_gives_way_is_the_collision_until_then() {
         }
     }
 }
+
+/// A controller reporting its context in a frame turned from the pad's: every context
+/// vector (position error, commanded velocity and acceleration) is the pad frame's turned
+/// by that angle, the fingertip's own channels are untouched, the trace says so, and an
+/// angle beyond a quarter turn is refused.
+#[test]
+fn a_turned_context_frame_turns_every_context_vector() {
+    // A braking finger: every context vector moves.
+    let s = Scenario::ContactBraking;
+    let opts = |degrees: f64| SimOptions {
+        seed: 5,
+        randomize: true,
+        context_turned_deg: degrees,
+        ..SimOptions::default()
+    };
+    let pad = sim::simulate(&s, &opts(0.0)).expect("valid options");
+    let turned = sim::simulate(&s, &opts(90.0)).expect("valid options");
+    for name in ["force_x", "force_y", "skin_accel", "stress_rate"] {
+        assert_eq!(col(&pad, name), col(&turned, name), "{name}");
+    }
+    for v in ["pos_err", "vel_des", "acc_des"] {
+        let (x, y) = (format!("{v}_x"), format!("{v}_y"));
+        let largest = max_abs(col(&pad, &x)).max(max_abs(col(&pad, &y)));
+        assert!(largest > 0.0, "{v} reads nothing");
+        for k in 0..pad.len() {
+            // Turned a quarter turn towards y, the frame's x is the pad's y, its y the
+            // pad's -x.
+            assert!(
+                (col(&turned, &x)[k] - col(&pad, &y)[k]).abs() <= 1e-9 * largest,
+                "{v} x at {k}"
+            );
+            assert!(
+                (col(&turned, &y)[k] + col(&pad, &x)[k]).abs() <= 1e-9 * largest,
+                "{v} y at {k}"
+            );
+        }
+    }
+    assert_eq!(turned.meta("context_turned_deg"), Some("90"));
+    assert!(pad.meta("context_turned_deg").is_none());
+    for bad in [-90.5, 91.0, f64::INFINITY] {
+        assert!(sim::simulate(&s, &opts(bad)).is_err(), "{bad}");
+    }
+}

@@ -177,6 +177,17 @@ pub const ENCODER_RESOLUTION_RANGE_UM: (f64, f64) = (0.1, 100.0);
 /// The highest [`SimOptions::film_highpass_hz`] (Hz).
 pub const MAX_FILM_HIGHPASS_HZ: f64 = 10.0;
 
+/// The largest [`SimOptions::context_turned_deg`], either way (degrees).
+pub const MAX_CONTEXT_TURNED_DEG: f64 = 90.0;
+
+/// The context's vectors, as (x, y) pairs of [`CHANNELS`] names: position error,
+/// commanded velocity, commanded acceleration.
+const CONTEXT_VECTORS: [(&str, &str); 3] = [
+    ("pos_err_x", "pos_err_y"),
+    ("vel_des_x", "vel_des_y"),
+    ("acc_des_x", "acc_des_y"),
+];
+
 /// Metadata key of the physical onset time in seconds (absent when nothing happened).
 pub const META_ONSET: &str = "onset_s";
 /// Metadata key of the scenario name.
@@ -686,6 +697,14 @@ pub struct SimOptions {
     /// then reads as a rate that dies away over 1 / (2 pi f) s. The trace records it when
     /// it is not 0.
     pub film_highpass_hz: f64,
+    /// The frame the controller reports its context in (position error, commanded velocity
+    /// and acceleration), turned by this angle from the pad's, towards y (degrees, -90 to
+    /// 90; 0, the default, in every run of the envelope and as the CAN protocol asks: x
+    /// along the pad normal). A controller whose model of the pad's orientation is off, or
+    /// one that reports in a task frame fixed at one posture, which the pad turns away
+    /// from as the arm moves: a vector with components (x, y) in the pad's frame reads
+    /// (x cos a + y sin a, y cos a - x sin a). The trace records it when it is not 0.
+    pub context_turned_deg: f64,
     /// Parameters a randomized run draws from another range than the envelope's (the
     /// last one given for a parameter counts): how a detector fares on one arm's, sensor's
     /// or object's range, or beyond the envelope. Each is recorded in the trace as
@@ -725,6 +744,7 @@ impl Default for SimOptions {
             noise_factor: 1.0,
             encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
             film_highpass_hz: 0.0,
+            context_turned_deg: 0.0,
             ranges: Vec::new(),
             obstacle_gives_way_s: None,
         }
@@ -854,6 +874,13 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         MAX_FILM_HIGHPASS_HZ,
         "0 to 10 Hz",
     )?;
+    check(
+        "context_turned_deg",
+        opts.context_turned_deg,
+        -MAX_CONTEXT_TURNED_DEG,
+        MAX_CONTEXT_TURNED_DEG,
+        "-90 to 90 degrees",
+    )?;
     if let Some(after) = opts.obstacle_gives_way_s {
         check("obstacle_gives_way_s", after, 0.0, 1.0, "0 to 1 s")?;
     }
@@ -866,6 +893,25 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         r.check().map_err(SimError::BadRange)?;
     }
     Ok(())
+}
+
+/// Expresses the context's vectors of `channels` (in the pad's frame) in a frame turned by
+/// `degrees` from it.
+fn turn_context(channels: &mut [Vec<f64>], degrees: f64) {
+    if degrees == 0.0 {
+        return;
+    }
+    let (s, c) = degrees.to_radians().sin_cos();
+    let index = |name: &str| CHANNELS.iter().position(|ch| ch.name == name);
+    for (x, y) in CONTEXT_VECTORS {
+        let (Some(ix), Some(iy)) = (index(x), index(y)) else {
+            continue;
+        };
+        let (xs, ys) = channels.split_at_mut(iy);
+        for (x, y) in xs[ix].iter_mut().zip(ys[0].iter_mut()) {
+            (*x, *y) = (c * *x + s * *y, c * *y - s * *x);
+        }
+    }
 }
 
 /// Runs one scenario and returns its trace.
@@ -927,7 +973,8 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         film_highpass_hz: opts.film_highpass_hz,
         obstacle_gives_way_s: gives_way,
     };
-    let out = engine::run(&mut setup, &mut noise);
+    let mut out = engine::run(&mut setup, &mut noise);
+    turn_context(&mut out.channels, opts.context_turned_deg);
     if let Some(after) = gives_way {
         meta.push(("obstacle_gives_way_s".into(), fmt_f64(after)));
         meta.push(("obstacle_peak_force_n".into(), fmt_f64(out.obstacle_peak)));
@@ -1335,6 +1382,9 @@ fn push_metadata(
     }
     if opts.film_highpass_hz > 0.0 {
         trace.push_metadata("film_highpass_hz", &fmt_f64(opts.film_highpass_hz))?;
+    }
+    if opts.context_turned_deg != 0.0 {
+        trace.push_metadata("context_turned_deg", &fmt_f64(opts.context_turned_deg))?;
     }
     for r in &opts.ranges {
         trace.push_metadata(
