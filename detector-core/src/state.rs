@@ -400,9 +400,9 @@ impl State {
     }
 }
 
-/// The first bytes of a saved state: its format, version 3 (64 features; filter states
-/// holding their output times 2³¹).
-pub const SAVED_MAGIC: [u8; 4] = *b"FTS3";
+/// The first bytes of a saved state: its format, version 4 (64 features; filter states
+/// holding their output times 2³², primed by their sample count).
+pub const SAVED_MAGIC: [u8; 4] = *b"FTS4";
 
 /// Bytes of an event's saved state: rising, onset, and each level's up and run.
 const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2);
@@ -468,7 +468,7 @@ impl core::fmt::Display for StateError {
                 State::SAVED_BYTES
             ),
             StateError::Magic => {
-                f.write_str("not a saved detector state (it does not start with `FTS3`)")
+                f.write_str("not a saved detector state (it does not start with `FTS4`)")
             }
             StateError::Flag => f.write_str("a flag of the saved state is neither 0 nor 1"),
             StateError::Phase(p, n) => {
