@@ -1611,8 +1611,17 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
         st.acc = i64::from(x) << 32;
     } else {
         st.pos += 1;
-        // n ≥ 2, so 2^31 / n ≤ 2^30 (one 32-bit division, in hardware on the chip).
-        filter_step(st, x, (1u32 << 31) / u32::from(st.pos));
+        let d = i64::from(x.saturating_sub(filter_output(st)));
+        // The n-th sample's gain is ⌊2³¹ / n⌋ (one 32-bit division, in hardware on the
+        // chip): ½ for the second, whose doubled step is a shift; from the third on, twice
+        // the gain is below 2³¹, which the mask tells the compiler, for one signed
+        // multiply-accumulate.
+        st.acc += if st.pos == 2 {
+            d << 31
+        } else {
+            let twice = ((1u32 << 31) / u32::from(st.pos)) << 1;
+            d * i64::from((twice & 0x7fff_ffff) as i32)
+        };
     }
     filter_output(st)
 }
