@@ -7,7 +7,7 @@
 use detector_build::Config;
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::replay::{DecisionRecord, replay};
+use fingertip::replay::replay;
 use fingertip::score::classify;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
@@ -87,11 +87,12 @@ fn steady_motion(err_um: impl Fn(f64) -> f64) -> Trace {
     Trace::from_columns("steady motion", t, channels).expect("a trace")
 }
 
+/// How many disturbances `detector` confirms on `trace`.
 fn disturbances(detector: &Detector, trace: &Trace) -> usize {
     replay(detector, trace, |_, _, _| {})
         .expect("replays")
         .iter()
-        .filter(|d: &&DecisionRecord| d.is_confirm() && d.event == "disturbance")
+        .filter(|d| d.is_confirm() && d.event == "disturbance")
         .count()
 }
 
