@@ -1,6 +1,6 @@
 //! Runs the fixed-point detector — the same code as on the chip — over a trace.
 
-use detector_core::{Detector, DetectorTick, Inputs, Level, Output, PhaseId, State, Tick};
+use detector_core::{Detector, DetectorTick, Inputs, Level, Output, PhaseId, Signal, State, Tick};
 
 use crate::trace::{ReadAhead, Trace, TraceError, TraceReader};
 
@@ -310,7 +310,18 @@ fn replay_with(
     trace: &Trace,
     mut each_tick: impl FnMut(usize, &State, &Output),
 ) -> Result<Vec<DecisionRecord>, ReplayError> {
-    let columns = channel_columns(detector, trace)?;
+    // Each channel's samples converted at once: a loop over one column at a time runs
+    // several conversions in parallel, where one row at a time waits for each.
+    let samples: Vec<Vec<Signal>> = channel_columns(detector, trace)?
+        .iter()
+        .enumerate()
+        .map(|(k, column)| {
+            column
+                .iter()
+                .map(|&v| detector.sample_from_si(k, v))
+                .collect()
+        })
+        .collect();
     check_rate(detector, trace.name(), trace.rate_hz())?;
     ticker.start_from(detector, trace.name(), trace.metadata())?;
     let withheld_column = trace.column(WITHHELD_COLUMN);
@@ -333,7 +344,7 @@ fn replay_with(
             detector,
             row,
             faults,
-            |k| columns.get(k).and_then(|c| c.get(row)).copied(),
+            |k| samples.get(k).and_then(|c| c.get(row)).copied(),
             |r| match usize::try_from(r).ok().and_then(|r| t.get(r)) {
                 Some(&at) => at,
                 None => t[0] + r as f64 / trace.rate_hz(),
@@ -519,7 +530,7 @@ fn replay_rows(
             if let Some(label) = r.truth {
                 part.rules.truth(label, r.t, r.line)?;
             }
-            let (values, columns) = (r.values, &part.columns);
+            let (values, columns, detector) = (r.values, &part.columns, part.detector);
             let faults = match part.withheld.and_then(|c| values.get(c)) {
                 Some(&v) => withheld(part.detector, &name, r.line, v)?,
                 None => 0,
@@ -528,7 +539,10 @@ fn replay_rows(
                 part.detector,
                 row,
                 faults,
-                |k| columns.get(k).and_then(|&c| values.get(c)).copied(),
+                |k| {
+                    let v = columns.get(k).and_then(|&c| values.get(c))?;
+                    Some(detector.sample_from_si(k, *v))
+                },
                 |r| t0 + r as f64 * period,
             );
             each_tick(
@@ -654,7 +668,7 @@ impl Ticker {
         Ok(())
     }
 
-    /// One tick on row `row` with the channels `faults` withheld: channel `k`'s SI value
+    /// One tick on row `row` with the channels `faults` withheld: channel `k`'s sample
     /// from `sample(k)` (0 when missing); levels raised are recorded with times from
     /// `time_of(row of the tick)` (negative before the first row).
     fn tick(
@@ -662,7 +676,7 @@ impl Ticker {
         detector: &Detector,
         row: usize,
         faults: u32,
-        sample: impl Fn(usize) -> Option<f64>,
+        sample: impl Fn(usize) -> Option<Signal>,
         time_of: impl Fn(i64) -> f64,
     ) {
         self.inputs.faults = faults;
@@ -673,7 +687,7 @@ impl Ticker {
             .enumerate()
             .take(detector.channels().len())
         {
-            *s = detector.sample_from_si(k, sample(k).unwrap_or(0.0));
+            *s = sample(k).unwrap_or(Signal::ZERO);
         }
         let tick: &dyn DetectorTick = if self.generated {
             &crate::builtin::ApproachTick
