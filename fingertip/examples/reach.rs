@@ -19,16 +19,26 @@
 //! threshold on it finds the event without reading steady motion as that event about as
 //! often; the threshold that would find 99.5 % of the events is printed with the share of
 //! event-free windows that reach it.
+//!
+//! `cargo run --release -p fingertip --example reach -- --traces PATH...` takes the same
+//! measures on labelled recordings instead (trace files, or directories searched for
+//! `*.csv`), such as those of another simulator: each disturbance, grouped by the
+//! recording's `scenario` metadata, and each very soft contact (`contact_very_soft_1`);
+//! the event-free windows are taken every 20 ms of the recordings labelled
+//! `free_motion` where the finger cruises at a steady commanded speed of at least 1 cm/s,
+//! as it does before an event.
 
 mod seeds;
 
 use detector_core::Detector;
+use fingertip::corpus::find_recordings;
 use fingertip::score::classify;
 use fingertip::sim::filters::HighPass1;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
 use rayon::prelude::*;
+use std::path::PathBuf;
 
 /// Rows per millisecond at the simulator's default rate.
 const MS: usize = 5;
@@ -86,16 +96,44 @@ fn film_rise(tr: &Trace, on: usize) -> Option<f64> {
 /// The lead-in of a run's event-free twin (ms).
 const TWIN_LEAD_IN_MS: usize = 100;
 
-/// One run: its measure (for a disturbance the best of its three ratios), whether the
-/// default detector got it right, and the same measure on its event-free twin.
-struct Run {
+/// A window's measure: a very soft contact's film rise, or a disturbance's three
+/// vibration ratios and the best of them.
+#[derive(Clone, Copy)]
+struct Measure {
     best: f64,
     ratios: [f64; 3],
-    right: bool,
-    event_free: f64,
 }
 
-fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<Run> {
+impl Measure {
+    fn film(rise: f64) -> Measure {
+        Measure {
+            best: rise,
+            ratios: [0.0; 3],
+        }
+    }
+
+    fn vibration(ratios: [f64; 3]) -> Measure {
+        Measure {
+            best: ratios.iter().copied().fold(0.0, f64::max),
+            ratios,
+        }
+    }
+}
+
+/// One run: its measure and whether the default detector got it right.
+struct Run {
+    measure: Measure,
+    right: bool,
+}
+
+/// The measures of one scenario's runs, and the same measures where nothing happens.
+struct Measured {
+    runs: Vec<Run>,
+    event_free: Vec<Measure>,
+}
+
+/// One simulated run and the measure on its event-free twin.
+fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(Run, Measure)> {
     let opts = SimOptions {
         seed,
         randomize: true,
@@ -104,8 +142,7 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<Run> {
     let tr = sim::simulate(&s, &opts).ok()?;
     let (on, _) = tr.truth_onset()?;
     let onset_s = tr.time().get(on).copied()?;
-    let decisions = replay::replay(detector, &tr, |_, _, _| {}).ok()?;
-    let right = classify(s.expected().map(|e| (e, onset_s)), &decisions).is_right();
+    let right = is_right(detector, &tr, s.expected().map(|e| (e, onset_s)))?;
     // The event-free twin: the same run started 100 ms sooner, so that its event comes
     // 100 ms after this run's onset.
     let twin = sim::simulate(
@@ -118,127 +155,283 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<Run> {
     .ok()?;
     if s == Scenario::ContactVerySoft1 {
         // The film's rise is judged up to 60 ms after `on`: the twin's event is later.
-        return Some(Run {
-            best: film_rise(&tr, on)?,
-            ratios: [0.0; 3],
+        let run = Run {
+            measure: Measure::film(film_rise(&tr, on)?),
             right,
-            event_free: film_rise(&twin, on)?,
-        });
+        };
+        return Some((run, Measure::film(film_rise(&twin, on)?)));
     }
-    // The filters settle in the run's first 10 ms; the onset is later.
-    let before = on.saturating_sub(30 * MS).max(10 * MS)..on;
-    let after = on..on + 50 * MS;
+    let (before, after) = windows(on);
     let ratios = vibration_ratios(&tr, before.clone(), after.clone())?;
     // The same windows in the twin end 50 ms before its event.
     let event_free = vibration_ratios(&twin, before, after)?;
-    Some(Run {
-        best: best_of(&ratios),
-        ratios,
+    let run = Run {
+        measure: Measure::vibration(ratios),
         right,
-        event_free: best_of(&event_free),
-    })
+    };
+    Some((run, Measure::vibration(event_free)))
 }
 
-fn best_of(ratios: &[f64; 3]) -> f64 {
-    ratios.iter().copied().fold(0.0, f64::max)
+/// The windows before and after a disturbance's onset row `on`: the 30 ms before (not the
+/// first 10 ms of the trace, where the filters settle) and the 50 ms after.
+fn windows(on: usize) -> (std::ops::Range<usize>, std::ops::Range<usize>) {
+    (
+        on.saturating_sub(30 * MS).max(10 * MS)..on,
+        on..on + 50 * MS,
+    )
+}
+
+/// Whether the commanded motion holds a steady speed of at least 1 cm/s over `rows`.
+fn cruising(tr: &Trace, rows: std::ops::Range<usize>) -> bool {
+    let column = |name: &str| tr.column(name).and_then(|c| c.get(rows.clone()));
+    let (Some(vx), Some(vy), Some(ax), Some(ay)) = (
+        column("vel_des_x"),
+        column("vel_des_y"),
+        column("acc_des_x"),
+        column("acc_des_y"),
+    ) else {
+        return false;
+    };
+    ax.iter().chain(ay).all(|&a| a == 0.0) && vx.iter().zip(vy).all(|(x, y)| x.hypot(*y) >= 0.01)
+}
+
+/// Whether the detector is right on `tr`, which should show `expected` (event, onset s).
+fn is_right(detector: &Detector, tr: &Trace, expected: Option<(&str, f64)>) -> Option<bool> {
+    let decisions = replay::replay(detector, tr, |_, _, _| {}).ok()?;
+    Some(classify(expected, &decisions).is_right())
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let (runs, base) = seeds::runs_and_base(500)?;
     let config = detector_build::Config::from_toml(APPROACH_TOML)?;
     let detector = detector_build::build(&config)?;
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--traces") {
+        let paths: Vec<PathBuf> = args[1..].iter().map(PathBuf::from).collect();
+        return recordings(&detector, &paths);
+    }
+    let (runs, base) = seeds::runs_and_base(500)?;
     println!(
         "{runs} randomized runs per scenario (seeds {base}..{}), configs/approach.toml",
         base + runs - 1
     );
     for s in Scenario::disturbances().chain([Scenario::ContactVerySoft1]) {
-        let results: Vec<Run> = (base..base + runs)
+        let (runs, event_free) = (base..base + runs)
             .into_par_iter()
             .filter_map(|seed| run(&detector, s, seed))
-            .collect();
-        let (edges, what): (&[f64], &str) = if s == Scenario::ContactVerySoft1 {
-            (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]")
-        } else {
-            (
-                &[1.5, 2.0, 3.0, 5.0],
-                "vibration RMS after / before, the best of force, skin acceleration and position error",
-            )
-        };
-        println!("\n{} ({} runs), by {what}:", s.name(), results.len());
-        println!(
-            "  {:<12} {:>5} {:>6} {:>7}   median ratio: force / accel / error",
-            "bin", "runs", "right", "share"
+            .unzip();
+        let measured = Measured { runs, event_free };
+        let film = s == Scenario::ContactVerySoft1;
+        print_scenario(
+            s.name(),
+            film,
+            &measured,
+            &format!("each run's twin, {TWIN_LEAD_IN_MS} ms sooner"),
         );
-        for b in 0..=edges.len() {
-            let lo = if b == 0 {
-                f64::NEG_INFINITY
-            } else {
-                edges[b - 1]
-            };
-            let hi = edges.get(b).copied().unwrap_or(f64::INFINITY);
-            let mut inside: Vec<&Run> = results
-                .iter()
-                .filter(|r| (lo..hi).contains(&r.best))
-                .collect();
-            if inside.is_empty() {
-                continue;
-            }
-            let right = inside.iter().filter(|r| r.right).count();
-            let label = match (b, edges.get(b)) {
-                (0, Some(h)) => format!("< {h}"),
-                (_, Some(h)) => format!("{lo}-{h}"),
-                (_, None) => format!(">= {lo}"),
-            };
-            let medians = if s == Scenario::ContactVerySoft1 {
-                String::new()
-            } else {
-                let median = |k: usize, v: &mut Vec<&Run>| {
-                    v.sort_by(|a, b| a.ratios[k].total_cmp(&b.ratios[k]));
-                    v[v.len() / 2].ratios[k]
-                };
-                format!(
-                    "{:.1} / {:.1} / {:.1}",
-                    median(0, &mut inside),
-                    median(1, &mut inside),
-                    median(2, &mut inside)
-                )
-            };
-            println!(
-                "  {label:<12} {:>5} {right:>6} {:>6.1} %   {medians}",
-                inside.len(),
-                100.0 * right as f64 / inside.len() as f64
-            );
-        }
-        print_event_free(&results);
     }
     Ok(())
 }
 
-/// How high the measure reads where nothing happens, and how many events read below that.
-fn print_event_free(results: &[Run]) {
-    let mut free: Vec<f64> = results.iter().map(|r| r.event_free).collect();
-    if free.is_empty() {
+/// The measures on labelled recordings: the disturbances and very soft contacts, by
+/// scenario, against windows of the free-motion recordings.
+fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std::error::Error>> {
+    if paths.is_empty() {
+        return Err("--traces needs at least one trace file or directory".into());
+    }
+    let files = find_recordings(paths)?;
+    let traces: Vec<Trace> = files
+        .par_iter()
+        .map(Trace::read)
+        .collect::<Result<_, _>>()?;
+    let scenario = |tr: &Trace| tr.meta(sim::META_SCENARIO).unwrap_or("").to_string();
+    // Event-free windows every 20 ms of free motion, where the finger cruises as it does
+    // before an event: at a steady commanded speed of at least 1 cm/s from 50 ms before
+    // to 60 ms after.
+    let free: Vec<&Trace> = traces
+        .iter()
+        .filter(|tr| scenario(tr) == "free_motion")
+        .collect();
+    let free_windows = |measure: &(dyn Fn(&Trace, usize) -> Option<Measure> + Sync)| {
+        free.par_iter()
+            .flat_map_iter(|tr| {
+                (50 * MS..tr.len().saturating_sub(60 * MS))
+                    .step_by(20 * MS)
+                    .filter(|&on| cruising(tr, on - 50 * MS..on + 60 * MS))
+                    .filter_map(|on| measure(tr, on))
+            })
+            .collect::<Vec<Measure>>()
+    };
+    let vibration = |tr: &Trace, on: usize| {
+        let (before, after) = windows(on);
+        vibration_ratios(tr, before, after).map(Measure::vibration)
+    };
+    let film = |tr: &Trace, on: usize| film_rise(tr, on).map(Measure::film);
+    let (free_vibration, free_film) = (free_windows(&vibration), free_windows(&film));
+    println!(
+        "{} recordings ({} of free motion, {} event-free windows), configs/approach.toml",
+        traces.len(),
+        free.len(),
+        free_vibration.len()
+    );
+    let mut scenarios: Vec<String> = traces.iter().map(scenario).collect();
+    scenarios.sort();
+    scenarios.dedup();
+    for name in scenarios {
+        let very_soft = name == Scenario::ContactVerySoft1.name();
+        let runs: Vec<Run> = traces
+            .par_iter()
+            .filter(|tr| scenario(tr) == name)
+            .filter_map(|tr| {
+                let (on, event) = tr.truth_onset()?;
+                if !(very_soft || event == "disturbance") {
+                    return None;
+                }
+                let onset_s = tr.time().get(on).copied()?;
+                let right = is_right(detector, tr, Some((event, onset_s)))?;
+                let measure = if very_soft {
+                    Measure::film(film_rise(tr, on)?)
+                } else {
+                    let (before, after) = windows(on);
+                    Measure::vibration(vibration_ratios(tr, before, after)?)
+                };
+                Some(Run { measure, right })
+            })
+            .collect();
+        if runs.is_empty() {
+            continue;
+        }
+        let event_free = if very_soft {
+            &free_film
+        } else {
+            &free_vibration
+        };
+        let measured = Measured {
+            runs,
+            event_free: event_free.clone(),
+        };
+        print_scenario(
+            &name,
+            very_soft,
+            &measured,
+            "windows of the free-motion recordings",
+        );
+    }
+    Ok(())
+}
+
+/// One scenario's table: the runs binned by their measure (the film's rise for very soft
+/// contacts), with the right share, and the event-free comparison.
+fn print_scenario(name: &str, film: bool, measured: &Measured, event_free: &str) {
+    let results = &measured.runs;
+    let (edges, what): (&[f64], &str) = if film {
+        (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]")
+    } else {
+        (
+            &[1.5, 2.0, 3.0, 5.0],
+            "vibration RMS after / before, the best of force, skin acceleration and position error",
+        )
+    };
+    println!("\n{name} ({} runs), by {what}:", results.len());
+    println!(
+        "  {:<12} {:>5} {:>6} {:>7}   median ratio: force / accel / error",
+        "bin", "runs", "right", "share"
+    );
+    for b in 0..=edges.len() {
+        let lo = if b == 0 {
+            f64::NEG_INFINITY
+        } else {
+            edges[b - 1]
+        };
+        let hi = edges.get(b).copied().unwrap_or(f64::INFINITY);
+        let mut inside: Vec<&Run> = results
+            .iter()
+            .filter(|r| (lo..hi).contains(&r.measure.best))
+            .collect();
+        if inside.is_empty() {
+            continue;
+        }
+        let right = inside.iter().filter(|r| r.right).count();
+        let label = match (b, edges.get(b)) {
+            (0, Some(h)) => format!("< {h}"),
+            (_, Some(h)) => format!("{lo}-{h}"),
+            (_, None) => format!(">= {lo}"),
+        };
+        let medians = if film {
+            String::new()
+        } else {
+            let median = |k: usize, v: &mut Vec<&Run>| {
+                v.sort_by(|a, b| a.measure.ratios[k].total_cmp(&b.measure.ratios[k]));
+                v[v.len() / 2].measure.ratios[k]
+            };
+            format!(
+                "{:.1} / {:.1} / {:.1}",
+                median(0, &mut inside),
+                median(1, &mut inside),
+                median(2, &mut inside)
+            )
+        };
+        println!(
+            "  {label:<12} {:>5} {right:>6} {:>6.1} %   {medians}",
+            inside.len(),
+            100.0 * right as f64 / inside.len() as f64
+        );
+    }
+    print_event_free(measured, event_free, film);
+}
+
+/// The `q` quantile of `values` (sorted here).
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[((values.len() - 1) as f64 * q).round() as usize]
+}
+
+/// How high the measure reads where nothing happens (`place`), on each sensor too for a
+/// disturbance's, and how many events read below that.
+fn print_event_free(measured: &Measured, place: &str, film: bool) {
+    let results = &measured.runs;
+    let mut free: Vec<f64> = measured.event_free.iter().map(|m| m.best).collect();
+    if free.is_empty() || results.is_empty() {
         return;
     }
-    free.sort_by(f64::total_cmp);
-    let quantile = |q: f64| free[((free.len() - 1) as f64 * q).round() as usize];
-    let largest = quantile(1.0);
-    let below: Vec<&Run> = results.iter().filter(|r| r.best < largest).collect();
+    let (median, p99, largest) = (
+        quantile(&mut free, 0.5),
+        quantile(&mut free, 0.99),
+        quantile(&mut free, 1.0),
+    );
+    let below: Vec<&Run> = results
+        .iter()
+        .filter(|r| r.measure.best < largest)
+        .collect();
     let right = below.iter().filter(|r| r.right).count();
     println!(
-        "  where nothing happens (each run's twin, {TWIN_LEAD_IN_MS} ms sooner): median {:.2}, \
-         99 % below {:.2}, largest {largest:.2}; {} of the events ({:.1} %) read below that \
-         largest, {right} of them right",
-        quantile(0.5),
-        quantile(0.99),
+        "  where nothing happens ({place}): median {median:.2}, 99 % below {p99:.2}, largest \
+         {largest:.2}; {} of the events ({:.1} %) read below that largest, {right} of them right",
         below.len(),
         100.0 * below.len() as f64 / results.len() as f64
     );
+    if !film {
+        let p99_of = |k: usize| {
+            let mut sensor: Vec<f64> = measured.event_free.iter().map(|m| m.ratios[k]).collect();
+            quantile(&mut sensor, 0.99)
+        };
+        let p99s = [p99_of(0), p99_of(1), p99_of(2)];
+        let within: Vec<&Run> = results
+            .iter()
+            .filter(|r| r.measure.ratios.iter().zip(&p99s).all(|(v, p)| v < p))
+            .collect();
+        println!(
+            "  there, 99 % below {:.2} / {:.2} / {:.2} on the force / accel / error alone; {} of \
+             the events read below all three, {} of them right",
+            p99s[0],
+            p99s[1],
+            p99s[2],
+            within.len(),
+            within.iter().filter(|r| r.right).count()
+        );
+    }
     // The threshold that would pass 99.5 % of the events, and how much steady motion it
     // would pass too.
-    let mut events: Vec<f64> = results.iter().map(|r| r.best).collect();
-    events.sort_by(f64::total_cmp);
-    let threshold = events[((events.len() - 1) as f64 * 0.005).round() as usize];
+    let mut events: Vec<f64> = results.iter().map(|r| r.measure.best).collect();
+    let threshold = quantile(&mut events, 0.005);
     let passed = free.iter().filter(|&&f| f >= threshold).count();
     println!(
         "  a threshold passing 99.5 % of the events is at most {threshold:.2}, which {:.1} % of \
