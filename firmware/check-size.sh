@@ -62,6 +62,13 @@ echo "boot stack: about $frames B ($(kib "$frames")) needed, $stack B ($(kib "$s
 status=0
 if [ "$flash" -gt "$FLASH_BUDGET" ]; then echo "check-size: flash over budget" >&2; status=1; fi
 if [ "$ram" -gt "$RAM_BUDGET" ]; then echo "check-size: static RAM over budget" >&2; status=1; fi
+# The Cortex-M4's floating-point unit is single precision: a double pulls in 2-3 KiB of
+# soft-float routines (firmware/README.md, Size).
+doubles=$("$tools/llvm-nm" "$elf" | awk '$3 ~ /^__aeabi_(d[a-z]|[a-z0-9]+2d$|d2)|^__[a-z]+df[0-9]$/ { print $3 }' | sort -u | tr '\n' ' ')
+if [ -n "$doubles" ]; then
+    echo "check-size: double-precision arithmetic in the image: $doubles" >&2
+    status=1
+fi
 if [ "$frames" -gt "$stack" ]; then
     echo "check-size: the boot stack does not fit in the RAM left over: the image would fault at boot" >&2
     status=1

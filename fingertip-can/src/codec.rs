@@ -448,12 +448,18 @@ const SLOT_BYTES: usize = 11;
 const SLOTS_START: usize = 8;
 
 impl ContextSlot {
-    /// Metres per second per raw unit of velocity.
-    pub const VEL_SCALE: f64 = 1e-4;
-    /// Metres per second squared per raw unit of acceleration.
-    pub const ACC_SCALE: f64 = 2e-3;
-    /// Metres per raw unit of position error.
-    pub const POS_SCALE: f64 = 1e-6;
+    /// Raw units of velocity per m/s.
+    pub const VEL_PER_SI: u32 = 10_000;
+    /// Raw units of acceleration per m/s².
+    pub const ACC_PER_SI: u32 = 500;
+    /// Raw units of position error per metre.
+    pub const POS_PER_SI: u32 = 1_000_000;
+    /// Metres per second per raw unit of velocity (1e-4).
+    pub const VEL_SCALE: f64 = 1.0 / Self::VEL_PER_SI as f64;
+    /// Metres per second squared per raw unit of acceleration (2e-3).
+    pub const ACC_SCALE: f64 = 1.0 / Self::ACC_PER_SI as f64;
+    /// Metres per raw unit of position error (1e-6).
+    pub const POS_SCALE: f64 = 1.0 / Self::POS_PER_SI as f64;
 
     /// From SI values (m/s, m/s², m), rounded to nearest and saturated at the ends of the
     /// ranges.
@@ -638,6 +644,15 @@ impl ContextPart {
             ContextPart::Velocity => ContextSlot::VEL_SCALE,
             ContextPart::Acceleration => ContextSlot::ACC_SCALE,
             ContextPart::PositionError => ContextSlot::POS_SCALE,
+        }
+    }
+
+    /// Raw units per SI unit, exactly: a board converts without floating point.
+    pub const fn per_si(self) -> u32 {
+        match self {
+            ContextPart::Velocity => ContextSlot::VEL_PER_SI,
+            ContextPart::Acceleration => ContextSlot::ACC_PER_SI,
+            ContextPart::PositionError => ContextSlot::POS_PER_SI,
         }
     }
 
@@ -1579,6 +1594,18 @@ mod tests {
             vel_des: [v, -v],
             acc_des: [-v, v],
             pos_err: [8 * v, -8 * v],
+        }
+    }
+
+    /// The scales derived from the whole raw units per SI unit are the decimal steps the
+    /// DBC and the docs state, to the last bit.
+    #[test]
+    fn the_scales_are_the_decimal_steps() {
+        assert_eq!(ContextPart::Velocity.scale(), 1e-4);
+        assert_eq!(ContextPart::Acceleration.scale(), 2e-3);
+        assert_eq!(ContextPart::PositionError.scale(), 1e-6);
+        for part in ContextPart::ALL {
+            assert_eq!(part.scale() * f64::from(part.per_si()), 1.0);
         }
     }
 

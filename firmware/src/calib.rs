@@ -124,24 +124,27 @@ impl Calibration {
         }
     }
 
+    // The parameters as `new` takes them, in single precision, rounded once (each
+    // division is by a power of two, which is exact).
+
     /// The gain, units per count.
-    pub fn gain(&self) -> f64 {
-        f64::from(self.gain.to_bits()) / 16_777_216.0
+    pub fn gain(&self) -> f32 {
+        self.gain.to_bits() as f32 / 16_777_216.0
     }
 
     /// The zero at the reference temperature, counts.
-    pub fn zero(&self) -> f64 {
-        f64::from(self.zero.to_bits()) / 256.0
+    pub fn zero(&self) -> f32 {
+        self.zero.to_bits() as f32 / 256.0
     }
 
     /// The zero's drift, counts per °C.
-    pub fn drift(&self) -> f64 {
-        f64::from(self.drift.to_bits()) / 256.0
+    pub fn drift(&self) -> f32 {
+        self.drift.to_bits() as f32 / 256.0
     }
 
     /// The reference temperature, °C.
-    pub fn t_ref(&self) -> f64 {
-        self.t_ref.to_f64()
+    pub fn t_ref(&self) -> f32 {
+        self.t_ref.to_f32()
     }
 }
 
@@ -204,8 +207,19 @@ mod tests {
     fn reference(c: &Calibration, t: Option<f64>, counts: u16) -> f64 {
         let drift = f64::from(c.drift.to_bits()) / 256.0;
         let t_ref = c.t_ref.to_f64();
-        let zero = c.zero() + t.map_or(0.0, |t| drift * (t - t_ref));
-        (f64::from(counts) - zero) * c.gain()
+        let zero = f64::from(c.zero.to_bits()) / 256.0 + t.map_or(0.0, |t| drift * (t - t_ref));
+        (f64::from(counts) - zero) * f64::from(c.gain.to_bits()) / 16_777_216.0
+    }
+
+    /// The parameters read back are those given, to single precision, whatever they went
+    /// through in fixed point.
+    #[test]
+    fn parameters_read_back_as_given() {
+        let c = Calibration::new(20.0 / 4096.0, 2048.5, -0.25, 31.5).unwrap();
+        assert_eq!(c.gain(), 20.0 / 4096.0);
+        assert_eq!((c.zero(), c.drift(), c.t_ref()), (2048.5, -0.25, 31.5));
+        let again = Calibration::new(c.gain(), c.zero(), c.drift(), c.t_ref()).unwrap();
+        assert_eq!(again, c);
     }
 
     #[test]
@@ -282,7 +296,7 @@ mod tests {
             let want = reference(&c, t.map(|t| Signal::from_f64(t).to_f64()), counts);
             prop_assume!(want.abs() < 32_000.0);
             // The zero's compensation is truncated to Q8 counts: at most 1/256 count.
-            let bound = 2.0 / 65_536.0 + c.gain().abs() / 256.0;
+            let bound = 2.0 / 65_536.0 + f64::from(c.gain().abs()) / 256.0;
             prop_assert!((got - want).abs() <= bound, "got {got}, want {want}, bound {bound}");
         }
     }

@@ -60,6 +60,54 @@ pub struct ChannelMap {
     pub factor: [i64; MAX_CHANNELS],
 }
 
+/// Working 2⁻¹⁶ steps per source step, Q16: `scale` × 2³² / `per_si` (a source counting
+/// `per_si` steps per SI unit), rounded to nearest, halves away from zero, and saturated
+/// at ±(2⁶³ − 1); NaN gives 0. Exact, in integers: the board has no double-precision unit, and the
+/// soft-float routines a double would pull in cost flash.
+fn factor(scale: f32, per_si: u32) -> i64 {
+    let bits = scale.to_bits();
+    let (exponent, fraction) = ((bits >> 23) & 0xff, bits & 0x7f_ffff);
+    if exponent == 0xff && fraction != 0 {
+        return 0;
+    }
+    // |scale| = m × 2^e with m below 2²⁴ (an infinity: the largest exponent, saturating).
+    let (m, e) = match exponent {
+        0 => (u64::from(fraction), -149),
+        _ => (u64::from(fraction | 0x80_0000), exponent as i32 - 150),
+    };
+    let den = u64::from(per_si.max(1));
+    // The quotient of n = m × 2^shift by den.
+    let shift = e + 32;
+    let magnitude = if shift >= 0 {
+        // n = (m × 2^s1) × 2^s2, m × 2^s1 below 2⁶⁴. From s2 = 32 on, n / den is at least
+        // 2²³ × 2⁷² / 2³²: saturated.
+        let s1 = shift.min(40) as u32;
+        let s2 = shift as u32 - s1;
+        let (q, r) = ((m << s1) / den, (m << s1) % den);
+        if s2 >= 32 || q > u64::MAX >> s2 {
+            u64::MAX
+        } else {
+            // r × 2^s2 is below 2³² × 2³¹: the fraction's part, rounded, stays exact.
+            (q << s2).saturating_add(((r << s2) + den / 2) / den)
+        }
+    } else {
+        // n / den = m / (den × 2^k); from den × 2^k ≥ 2⁶², above 2m, it rounds to 0.
+        let k = shift.unsigned_abs();
+        if k + 1 >= den.leading_zeros() {
+            0
+        } else {
+            let d = den << k;
+            (m + d / 2) / d
+        }
+    };
+    let magnitude = i64::try_from(magnitude).unwrap_or(i64::MAX);
+    if bits >> 31 == 0 {
+        magnitude
+    } else {
+        -magnitude
+    }
+}
+
 impl ChannelMap {
     /// Looks the board's channels up in a detector's configuration by name, with the
     /// conversion of each into its working unit.
@@ -71,29 +119,27 @@ impl ChannelMap {
             tip_state: TIP_STATE_CHANNELS.each_ref().map(find),
             factor: [0; MAX_CHANNELS],
         };
-        // SI per step of each source: 2⁻¹⁶ for a calibrated sample, the protocol's step
+        // Steps of each source per SI unit: 2¹⁶ for a calibrated sample, the protocol's
         // for the controller's values.
-        let adc = map.adc.map(|slot| (slot, 1.0 / 65536.0));
+        let adc = map.adc.map(|slot| (slot, 1 << 16));
         let context = map.context.iter().enumerate().map(|(k, &slot)| {
             let part = if k < 2 {
                 ContextPart::Velocity
             } else {
                 ContextPart::Acceleration
             };
-            (slot, part.scale())
+            (slot, part.per_si())
         });
         let tip = map
             .tip_state
-            .map(|slot| (slot, ContextPart::PositionError.scale()));
-        for (slot, si_per_step) in adc.into_iter().chain(context).chain(tip) {
+            .map(|slot| (slot, ContextPart::PositionError.per_si()));
+        for (slot, per_si) in adc.into_iter().chain(context).chain(tip) {
             let Some(i) = slot.map(usize::from) else {
                 continue;
             };
             let scale = detector.channel_scales().get(i).copied().unwrap_or(1.0);
             if let Some(f) = map.factor.get_mut(i) {
-                // Working 2⁻¹⁶ steps per source step, Q16; a scale too large saturates.
-                let x = f64::from(scale) * si_per_step * 65536.0 * 65536.0;
-                *f = (x + 0.5f64.copysign(x)) as i64;
+                *f = factor(scale, per_si);
             }
         }
         map
@@ -935,6 +981,95 @@ mod tests {
         Address, ContextGroup, ContextMsg, ContextPart, ContextPartMsg, ContextSlot, Counter,
         EventMsg, Message, PhaseMsg, StatusPage,
     };
+
+    /// The factor, worked out in 128-bit integers: m × 2^shift / den rounded half up.
+    fn exact_factor(scale: f32, per_si: u32) -> i64 {
+        if scale.is_nan() {
+            return 0;
+        }
+        if scale.is_infinite() {
+            return if scale > 0.0 { i64::MAX } else { -i64::MAX };
+        }
+        let bits = scale.to_bits();
+        let (exponent, fraction) = ((bits >> 23) & 0xff, bits & 0x7f_ffff);
+        let (m, e) = match exponent {
+            0 => (u128::from(fraction), -149),
+            _ => (u128::from(fraction | 0x80_0000), exponent as i32 - 150),
+        };
+        let den = u128::from(per_si.max(1));
+        let shift = e + 32;
+        let magnitude = if shift >= 0 {
+            if shift > 100 {
+                u128::MAX
+            } else {
+                ((m << shift) + den / 2) / den
+            }
+        } else if shift < -100 {
+            0
+        } else {
+            let d = den << shift.unsigned_abs();
+            (m + d / 2) / d
+        };
+        let magnitude = i64::try_from(magnitude).unwrap_or(i64::MAX);
+        if scale.is_sign_negative() {
+            -magnitude
+        } else {
+            magnitude
+        }
+    }
+
+    #[test]
+    fn factors_are_the_scales_over_the_steps() {
+        // A force in N per 2⁻¹⁶ N; a position error in µm per µm step; m/s² per 2 mm/s².
+        assert_eq!(factor(1.0, 1 << 16), 1 << 16);
+        assert_eq!(factor(100.0, 1 << 16), 100 << 16);
+        assert_eq!(factor(1e6, ContextPart::PositionError.per_si()), 1 << 32);
+        assert_eq!(factor(-2.5, ContextPart::Velocity.per_si()), -1_073_742);
+        assert_eq!(factor(f32::NAN, 500), 0);
+        assert_eq!(factor(f32::INFINITY, 500), i64::MAX);
+        assert_eq!(factor(f32::NEG_INFINITY, 500), -i64::MAX);
+        assert_eq!(factor(f32::MIN_POSITIVE / 8.0, 1), 0);
+        assert_eq!(factor(f32::MAX, 1), i64::MAX);
+    }
+
+    proptest::proptest! {
+        /// Every bit pattern of a scale, against every source's step and the extremes.
+        #[test]
+        fn factors_are_exact(
+            bits in proptest::prelude::any::<u32>(),
+            per_si in proptest::prop_oneof![
+                proptest::strategy::Just(1u32),
+                proptest::strategy::Just(500),
+                proptest::strategy::Just(10_000),
+                proptest::strategy::Just(65_536),
+                proptest::strategy::Just(1_000_000),
+                proptest::strategy::Just(u32::MAX),
+                proptest::prelude::any::<u32>(),
+            ],
+        ) {
+            let scale = f32::from_bits(bits);
+            proptest::prop_assert_eq!(factor(scale, per_si), exact_factor(scale, per_si));
+        }
+
+        /// Scales of the working range (powers of ten from 10⁻³ to 10⁷), as the double
+        /// precision product gave them.
+        #[test]
+        fn factors_agree_with_double_precision(
+            mantissa in 1.0f32..10.0,
+            decade in -3i32..7,
+            per_si in proptest::prop_oneof![
+                proptest::strategy::Just(500u32),
+                proptest::strategy::Just(10_000),
+                proptest::strategy::Just(65_536),
+                proptest::strategy::Just(1_000_000),
+            ],
+        ) {
+            let scale = mantissa * 10f32.powi(decade);
+            let x = f64::from(scale) / f64::from(per_si) * 65536.0 * 65536.0;
+            let want = (x + 0.5f64.copysign(x)) as i64;
+            proptest::prop_assert!((factor(scale, per_si) - want).abs() <= 1);
+        }
+    }
 
     /// A small configuration of our own, so these tests check the plumbing whatever the
     /// tuning of `configs/approach.toml`. Channels in an order unlike the board's.

@@ -127,9 +127,11 @@ pub fn check(detector: &mut Detector, image: &[u8], rate_hz: f32) -> Result<(), 
             {
                 return Err(LoadError::Channel(c.clone()));
             }
+            // In single precision: the difference of two rates within a factor of two
+            // is exact, and the products are rounded far below a ppm.
             let rate = detector.rate_hz();
-            let error = (f64::from(rate) - f64::from(rate_hz)).abs();
-            if error * 1e6 > f64::from(MAX_RATE_ERROR_PPM) * f64::from(rate_hz) {
+            let error = (rate - rate_hz).abs();
+            if error * 1e6 > MAX_RATE_ERROR_PPM as f32 * rate_hz {
                 return Err(LoadError::Rate(rate));
             }
             Ok(())

@@ -274,7 +274,7 @@ impl<F: NorFlash> Nvm<F> {
         let mut out = *nominal;
         let mut refused = ChannelSet::EMPTY;
         for (c, (cal, nom)) in out.iter_mut().zip(nominal).enumerate() {
-            let mut p = [nom.gain(), nom.zero(), nom.drift(), nom.t_ref()].map(|v| v as f32);
+            let mut p = [nom.gain(), nom.zero(), nom.drift(), nom.t_ref()];
             let mut stored = false;
             for parameter in CalibrationParameter::ALL {
                 let key = Key::Calibration {
