@@ -75,6 +75,12 @@ enum Command {
         /// as a rate that dies away.
         #[arg(long, default_value_t = 0.0)]
         film_highpass_hz: f64,
+        /// The corner of the low-pass through which the joint loops take their velocity
+        /// from the encoders' difference (Hz, 0 to 2,000; the envelope's loops read the
+        /// true velocity): a run on an arm that shakes itself with its encoders' steps. Its
+        /// trace starts 0.5 s into the run, the arm already shaking.
+        #[arg(long, default_value_t = 0.0)]
+        velocity_filter_hz: f64,
         /// The frame the controller reports its context in, turned by this angle from the
         /// pad's (degrees, -90 to 90; the protocol's and the envelope's is 0): a run from a
         /// controller whose pad frame is off, or that reports in a fixed task frame.
@@ -286,7 +292,7 @@ enum Command {
         /// Score labelled recordings instead of simulated runs: trace files, or directories
         /// searched (recursively) for `*.csv`. Each run of rows with the same `truth` label
         /// is one event.
-        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "film_highpass_hz", "context_turned_deg", "ranges"])]
+        #[arg(long, num_args = 1.., conflicts_with_all = ["runs", "seed", "free_hours", "lead_in_ms", "noise_factor", "encoder_um", "film_highpass_hz", "velocity_filter_hz", "context_turned_deg", "ranges"])]
         traces: Vec<PathBuf>,
         /// With `--traces`: how long after a labelled event's end a confirmation still
         /// counts for it (ms).
@@ -319,6 +325,12 @@ enum Command {
         /// steady rate of loading as a rate that dies away over 1 / (2 pi f) s.
         #[arg(long, default_value_t = 0.0)]
         film_highpass_hz: f64,
+        /// The corner of the low-pass through which the joint loops take their velocity
+        /// from the encoders' difference (Hz, 0 to 2,000; the envelope's loops read the
+        /// true velocity): how the detectors fare on an arm that shakes itself with its
+        /// encoders' steps, most where a joint is slow.
+        #[arg(long, default_value_t = 0.0)]
+        velocity_filter_hz: f64,
         /// The frame the controller reports its context in, turned by this angle from the
         /// pad's (degrees, -90 to 90; the protocol's and the envelope's is 0): how the
         /// detectors fare on a controller whose model of the pad's orientation is off, or
@@ -460,6 +472,7 @@ fn run(cli: Cli) -> Result<()> {
             noise_factor,
             encoder_um,
             film_highpass_hz,
+            velocity_filter_hz,
             context_turned_deg,
             ranges,
             obstacle_gives_way_ms,
@@ -474,6 +487,7 @@ fn run(cli: Cli) -> Result<()> {
                 noise_factor,
                 encoder_resolution_um: encoder_um,
                 film_highpass_hz,
+                velocity_filter_hz,
                 context_turned_deg,
                 ranges,
                 obstacle_gives_way_s: obstacle_gives_way_ms.map(|ms| ms / 1000.0),
@@ -612,6 +626,7 @@ fn run(cli: Cli) -> Result<()> {
             noise_factor,
             encoder_um,
             film_highpass_hz,
+            velocity_filter_hz,
             context_turned_deg,
             ranges,
             json,
@@ -626,6 +641,7 @@ fn run(cli: Cli) -> Result<()> {
                 noise_factor,
                 encoder_um,
                 film_highpass_hz,
+                velocity_filter_hz,
                 context_turned_deg,
                 ranges,
             },
@@ -1603,6 +1619,8 @@ struct Plan {
     encoder_um: f64,
     /// The film's AC coupling, Hz ([`SimOptions::film_highpass_hz`]).
     film_highpass_hz: f64,
+    /// The loops' velocity low-pass, Hz ([`SimOptions::velocity_filter_hz`]).
+    velocity_filter_hz: f64,
     /// The context's frame, turned from the pad's, degrees
     /// ([`SimOptions::context_turned_deg`]).
     context_turned_deg: f64,
@@ -1623,6 +1641,9 @@ impl Plan {
         }
         if self.film_highpass_hz > 0.0 {
             flags += &format!(" --film-highpass-hz {}", self.film_highpass_hz);
+        }
+        if self.velocity_filter_hz > 0.0 {
+            flags += &format!(" --velocity-filter-hz {}", self.velocity_filter_hz);
         }
         if self.context_turned_deg != 0.0 {
             flags += &format!(" --context-turned-deg={}", self.context_turned_deg);
@@ -1711,6 +1732,7 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         noise_factor: plan.noise_factor,
         encoder_resolution_um: plan.encoder_um,
         film_highpass_hz: plan.film_highpass_hz,
+        velocity_filter_hz: plan.velocity_filter_hz,
         context_turned_deg: plan.context_turned_deg,
         ranges: plan.ranges.clone(),
         ..SimOptions::default()
@@ -2035,6 +2057,7 @@ fn evaluate(
         noise_factor,
         encoder_um,
         film_highpass_hz,
+        velocity_filter_hz,
         context_turned_deg,
         ref ranges,
     } = plan;
@@ -2086,6 +2109,15 @@ fn evaluate(
             sim::MAX_FILM_HIGHPASS_HZ
         );
     }
+    if !(velocity_filter_hz.is_finite()
+        && (0.0..=sim::MAX_VELOCITY_FILTER_HZ).contains(&velocity_filter_hz))
+    {
+        bail!(
+            "--velocity-filter-hz = {} must be within 0..={} Hz",
+            fingertip::readable(velocity_filter_hz),
+            sim::MAX_VELOCITY_FILTER_HZ
+        );
+    }
     if !(context_turned_deg.is_finite() && context_turned_deg.abs() <= sim::MAX_CONTEXT_TURNED_DEG)
     {
         bail!(
@@ -2121,6 +2153,11 @@ fn evaluate(
     if film_highpass_hz > 0.0 {
         conditions += &format!(", the film AC-coupled at {film_highpass_hz} Hz");
     }
+    if velocity_filter_hz > 0.0 {
+        conditions += &format!(
+            ", the loops' velocity from the encoders' difference through {velocity_filter_hz} Hz"
+        );
+    }
     if context_turned_deg != 0.0 {
         conditions +=
             &format!(", the context in a frame turned {context_turned_deg} degrees from the pad's");
@@ -2153,6 +2190,7 @@ fn evaluate(
             "noise_factor": noise_factor,
             "encoder_um": encoder_um,
             "film_highpass_hz": film_highpass_hz,
+            "velocity_filter_hz": velocity_filter_hz,
             "context_turned_deg": context_turned_deg,
             "ranges": ranges
                 .iter()

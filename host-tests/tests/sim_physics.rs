@@ -915,3 +915,56 @@ fn a_turned_context_frame_turns_every_context_vector() {
         assert!(sim::simulate(&s, &opts(bad)).is_err(), "{bad}");
     }
 }
+
+/// RMS of the sample-to-sample step of `x` over `rows`: its content near the Nyquist rate,
+/// where a loop's 1 kHz force steps show.
+fn step_rms(x: &[f64], rows: std::ops::Range<usize>) -> f64 {
+    let steps: Vec<f64> = x[rows].windows(2).map(|w| w[1] - w[0]).collect();
+    (steps.iter().map(|d| d * d).sum::<f64>() / steps.len() as f64).sqrt()
+}
+
+#[test]
+fn loops_that_differentiate_their_encoders_shake_the_arm() {
+    let opts = |seed: u64, hz: f64| SimOptions {
+        seed,
+        randomize: true,
+        lead_in_s: 0.3,
+        velocity_filter_hz: hz,
+        ..SimOptions::default()
+    };
+    let mut shaken = 0;
+    for seed in 1..=6 {
+        let calm = sim::simulate(&Scenario::ContactSoft5, &opts(seed, 0.0)).expect("valid");
+        let shaking = sim::simulate(&Scenario::ContactSoft5, &opts(seed, 250.0)).expect("valid");
+        // The trace starts half a second into the run, the event where it was.
+        let first = shaking.time()[0];
+        assert!(
+            (first - sim::VELOCITY_WARM_S).abs() < 1e-9,
+            "first row at {first} s"
+        );
+        assert_eq!(shaking.len(), calm.len(), "seed {seed}");
+        let onset = |tr: &Trace| tr.time()[onset_row(tr)] - tr.time()[0];
+        assert!((onset(&shaking) - onset(&calm)).abs() < 1e-3, "seed {seed}");
+        assert_eq!(shaking.meta("velocity_filter_hz"), Some("250"));
+        assert!(calm.meta("velocity_filter_hz").is_none());
+        // Over the 300 ms of cruising before the event, the loops' force steps show on the
+        // force sensor or in the position error.
+        let rise = ["force_x", "force_y", "pos_err_x", "pos_err_y"]
+            .map(|name| {
+                step_rms(col(&shaking, name), 0..1500) / step_rms(col(&calm, name), 0..1500)
+            })
+            .into_iter()
+            .fold(0.0, f64::max);
+        if rise > 1.05 {
+            shaken += 1;
+        }
+    }
+    assert!(shaken >= 4, "the arm shook in only {shaken} of 6 runs");
+    // At rest the encoders do not move: a finger standing still is as calm either way.
+    let still = |hz| {
+        let tr = sim::simulate(&Scenario::SuddenAccelStandstill, &opts(3, hz)).expect("valid");
+        step_rms(col(&tr, "pos_err_x"), 0..500)
+    };
+    assert_eq!(still(0.0), 0.0);
+    assert_eq!(still(250.0), 0.0);
+}

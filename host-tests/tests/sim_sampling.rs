@@ -193,6 +193,18 @@ fn bad_options_are_errors_not_panics() {
             film_highpass_hz: f64::NAN,
             ..SimOptions::default()
         },
+        SimOptions {
+            velocity_filter_hz: -1.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            velocity_filter_hz: 2001.0,
+            ..SimOptions::default()
+        },
+        SimOptions {
+            velocity_filter_hz: f64::NAN,
+            ..SimOptions::default()
+        },
     ];
     for o in bad {
         let e = sim::simulate(&Scenario::ContactHard8, &o).unwrap_err();

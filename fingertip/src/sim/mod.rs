@@ -177,6 +177,15 @@ pub const ENCODER_RESOLUTION_RANGE_UM: (f64, f64) = (0.1, 100.0);
 /// The highest [`SimOptions::film_highpass_hz`] (Hz).
 pub const MAX_FILM_HIGHPASS_HZ: f64 = 10.0;
 
+/// The highest [`SimOptions::velocity_filter_hz`] (Hz).
+pub const MAX_VELOCITY_FILTER_HZ: f64 = 2000.0;
+
+/// How much sooner a run whose loops differentiate their encoders starts than its trace
+/// (s): the structure's lightly damped modes (1-4 % at 100-400 Hz: a time constant of up to
+/// 0.16 s) take that long to ring up to the loops' noise, which a detector would otherwise
+/// meet rising.
+pub const VELOCITY_WARM_S: f64 = 0.5;
+
 /// The largest [`SimOptions::context_turned_deg`], either way (degrees).
 pub const MAX_CONTEXT_TURNED_DEG: f64 = 90.0;
 
@@ -697,6 +706,16 @@ pub struct SimOptions {
     /// then reads as a rate that dies away over 1 / (2 pi f) s. The trace records it when
     /// it is not 0.
     pub film_highpass_hz: f64,
+    /// The corner of the first-order low-pass through which the joint loops take their
+    /// velocity from the encoders' difference over one tick, in Hz (0 to 2,000; 0, the
+    /// default, in every run of the envelope: the loops damp with the true velocity). That
+    /// is how most digital joint controllers get it, and each encoder count is then a
+    /// velocity step of one count per tick that the loops' damping turns into force: the
+    /// arm shakes itself, most where a joint is slow. A run with it starts
+    /// [`VELOCITY_WARM_S`] before its trace's first row, so that the trace (whose times
+    /// then start there) meets the arm already shaking; free motion starts at rest and
+    /// needs none. The trace records it when it is not 0.
+    pub velocity_filter_hz: f64,
     /// The frame the controller reports its context in (position error, commanded velocity
     /// and acceleration), turned by this angle from the pad's, towards y (degrees, -90 to
     /// 90; 0, the default, in every run of the envelope and as the CAN protocol asks: x
@@ -744,6 +763,7 @@ impl Default for SimOptions {
             noise_factor: 1.0,
             encoder_resolution_um: DEFAULT_ENCODER_RESOLUTION_UM,
             film_highpass_hz: 0.0,
+            velocity_filter_hz: 0.0,
             context_turned_deg: 0.0,
             ranges: Vec::new(),
             obstacle_gives_way_s: None,
@@ -875,6 +895,13 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         "0 to 10 Hz",
     )?;
     check(
+        "velocity_filter_hz",
+        opts.velocity_filter_hz,
+        0.0,
+        MAX_VELOCITY_FILTER_HZ,
+        "0 to 2000 Hz",
+    )?;
+    check(
         "context_turned_deg",
         opts.context_turned_deg,
         -MAX_CONTEXT_TURNED_DEG,
@@ -933,12 +960,24 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     let mut meta: Vec<(String, String)> = Vec::new();
     let mut values: Vec<(String, f64)> = plant.values();
     values.extend(sensors.values());
+    // A run whose loops differentiate their encoders starts sooner, by a lead-in whose rows
+    // are dropped (free motion starts at rest, where the encoders do not move).
+    let warm_s = match scenario.kind() {
+        Kind::Free => 0.0,
+        _ if opts.velocity_filter_hz > 0.0 => VELOCITY_WARM_S,
+        _ => 0.0,
+    };
+    let warm_rows = (warm_s * opts.rate_hz).round() as usize;
+    let warm_s = warm_rows as f64 / opts.rate_hz;
     let scene = match scenario.kind() {
         Kind::Free => free_motion_scene(opts, &mut traj_rng),
         kind => approach_scene(
             scenario,
             kind,
-            opts,
+            &SimOptions {
+                lead_in_s: opts.lead_in_s + warm_s,
+                ..opts.clone()
+            },
             &plant,
             &mut prng,
             &mut values,
@@ -946,7 +985,9 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         ),
     };
 
-    let duration = opts.duration_s.unwrap_or(scene.default_duration);
+    let duration = opts
+        .duration_s
+        .map_or(scene.default_duration, |d| d + warm_s);
     let rows = (duration * opts.rate_hz).round() as usize + 1;
     let (stiffest, required) =
         engine::required_rate(&plant, scene.object.as_ref(), scene.obstacle.as_ref());
@@ -971,22 +1012,28 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         context_rate_hz: opts.controller_rate_hz,
         encoder_resolution: opts.encoder_resolution_um / 1e6,
         film_highpass_hz: opts.film_highpass_hz,
+        velocity_filter_hz: opts.velocity_filter_hz,
         obstacle_gives_way_s: gives_way,
     };
     let mut out = engine::run(&mut setup, &mut noise);
+    for column in &mut out.channels {
+        column.drain(..warm_rows.min(column.len()));
+    }
     turn_context(&mut out.channels, opts.context_turned_deg);
     if let Some(after) = gives_way {
         meta.push(("obstacle_gives_way_s".into(), fmt_f64(after)));
         meta.push(("obstacle_peak_force_n".into(), fmt_f64(out.obstacle_peak)));
     }
 
-    let t: Vec<f64> = (0..rows).map(|k| k as f64 / opts.rate_hz).collect();
-    // The onset's time on the rows' clock, and the first row sampled at or after it (the
-    // sample of the onset's own step included).
+    let t: Vec<f64> = (warm_rows..rows).map(|k| k as f64 / opts.rate_hz).collect();
+    let rows = t.len();
+    // The onset's time on the rows' clock, and the first row of the trace sampled at or
+    // after it (the sample of the onset's own step included).
     let onset = out.onset.map(|(step, happened)| {
         let (row, within) = (step / n_over as u64, step % n_over as u64);
         let t_on = row as f64 / opts.rate_hz + within as f64 / (opts.rate_hz * n_over as f64);
-        (t_on, row + u64::from(within > 0), happened)
+        let first = (row + u64::from(within > 0)).saturating_sub(warm_rows as u64);
+        (t_on, first, happened)
     });
     let truth = truth(scenario, onset, rows);
     let channels = CHANNELS
@@ -1382,6 +1429,9 @@ fn push_metadata(
     }
     if opts.film_highpass_hz > 0.0 {
         trace.push_metadata("film_highpass_hz", &fmt_f64(opts.film_highpass_hz))?;
+    }
+    if opts.velocity_filter_hz > 0.0 {
+        trace.push_metadata("velocity_filter_hz", &fmt_f64(opts.velocity_filter_hz))?;
     }
     if opts.context_turned_deg != 0.0 {
         trace.push_metadata("context_turned_deg", &fmt_f64(opts.context_turned_deg))?;
