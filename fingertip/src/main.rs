@@ -8,10 +8,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-/// Runs' traces reuse the pages of the ones before (docs/simulator.md, Speed).
-#[global_allocator]
-static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
-
 use anyhow::{Context as _, Result, anyhow, bail};
 use clap::{Parser, Subcommand};
 use detector_build::Config;
@@ -28,6 +24,10 @@ use fingertip::trace::{Trace, TraceReader};
 use fingertip_can::{BusFormat, NodeId, Status, Transmitter, TxState};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
+
+/// Runs' traces reuse the pages of the ones before (docs/simulator.md, Speed).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 #[derive(Parser)]
 #[command(

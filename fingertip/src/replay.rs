@@ -532,7 +532,7 @@ fn replay_rows(
             }
             let (values, columns, detector) = (r.values, &part.columns, part.detector);
             let faults = match part.withheld.and_then(|c| values.get(c)) {
-                Some(&v) => withheld(part.detector, &name, r.line, v)?,
+                Some(&v) => withheld(detector, &name, r.line, v)?,
                 None => 0,
             };
             part.ticker.tick(
@@ -540,8 +540,8 @@ fn replay_rows(
                 row,
                 faults,
                 |k| {
-                    let v = columns.get(k).and_then(|&c| values.get(c))?;
-                    Some(detector.sample_from_si(k, *v))
+                    let v = columns.get(k).and_then(|&c| values.get(c));
+                    v.map(|&v| detector.sample_from_si(k, v))
                 },
                 |r| t0 + r as f64 * period,
             );

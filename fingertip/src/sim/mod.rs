@@ -962,12 +962,11 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     values.extend(sensors.values());
     // A run whose loops differentiate their encoders starts sooner, by a lead-in whose rows
     // are dropped (free motion starts at rest, where the encoders do not move).
-    let warm_s = match scenario.kind() {
-        Kind::Free => 0.0,
-        _ if opts.velocity_filter_hz > 0.0 => VELOCITY_WARM_S,
-        _ => 0.0,
+    let warm_rows = if opts.velocity_filter_hz > 0.0 && !matches!(scenario.kind(), Kind::Free) {
+        (VELOCITY_WARM_S * opts.rate_hz).round() as usize
+    } else {
+        0
     };
-    let warm_rows = (warm_s * opts.rate_hz).round() as usize;
     let warm_s = warm_rows as f64 / opts.rate_hz;
     let scene = match scenario.kind() {
         Kind::Free => free_motion_scene(opts, &mut traj_rng),
