@@ -640,11 +640,7 @@ impl ContextPart {
 
     /// SI units per raw unit (m/s, m/s², m).
     pub const fn scale(self) -> f64 {
-        match self {
-            ContextPart::Velocity => ContextSlot::VEL_SCALE,
-            ContextPart::Acceleration => ContextSlot::ACC_SCALE,
-            ContextPart::PositionError => ContextSlot::POS_SCALE,
-        }
+        1.0 / self.per_si() as f64
     }
 
     /// Raw units per SI unit, exactly: a board converts without floating point.

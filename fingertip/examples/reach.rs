@@ -319,8 +319,9 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
 }
 
 /// One scenario's table: the runs binned by their measure (the film's rise for very soft
-/// contacts), with the right share, and the event-free comparison.
-fn print_scenario(name: &str, film: bool, measured: &Measured, event_free: &str) {
+/// contacts), with the right share, and the event-free comparison (its windows taken at
+/// `place`).
+fn print_scenario(name: &str, film: bool, measured: &Measured, place: &str) {
     let results = &measured.runs;
     let (edges, what): (&[f64], &str) = if film {
         (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]")
@@ -375,7 +376,7 @@ fn print_scenario(name: &str, film: bool, measured: &Measured, event_free: &str)
             100.0 * right as f64 / inside.len() as f64
         );
     }
-    print_event_free(measured, event_free, film);
+    print_event_free(measured, place, film);
 }
 
 /// The `q` quantile of `values` (sorted here).
