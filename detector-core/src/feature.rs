@@ -9,6 +9,12 @@
 use crate::MAX_WINDOW;
 use crate::image::{ImageError, Reader, Sink};
 
+/// Whether an optional factor is left at its default, 0 (serde leaves it out).
+#[cfg(feature = "serde")]
+fn is_zero(v: &f32) -> bool {
+    *v == 0.0
+}
+
 /// A window shape for the short-time energy.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
@@ -129,16 +135,22 @@ pub enum StageSpec<N> {
         /// Cut-off of the motion's low-pass, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
-    /// The input while another feature stays at or below a level, else 0: evidence that
-    /// means something only in a given state, e.g. a vibration judged against the usual one
-    /// only while the commanded motion, which sets the usual one, holds steady. The output
-    /// is the input exactly (or 0), in the input's unit; the watched feature's unit is its
-    /// own, never traded against the input's.
+    /// The input while another feature stays at or below a level, else 0 (or the fraction
+    /// `leak` of the input): evidence that means something only in a given state, e.g. a
+    /// vibration judged against the usual one only while the commanded motion, which sets
+    /// the usual one, holds steady; or evidence that weighs less in a state, e.g. a jolt
+    /// while the arm's own loops may jolt it. The output is the input exactly (or its
+    /// fraction), in the input's unit; the watched feature's unit is its own, never traded
+    /// against the input's.
     Gate {
         /// Source channel or feature.
         input: N,
-        /// The gate shuts (the output is 0) while this feature is above its level.
+        /// The gate shuts while this feature is above its level.
         unless: Crossing<N>,
+        /// The fraction of the input a shut gate passes, within [0, 1], in steps of 2⁻¹⁶;
+        /// 0 (nothing) when absent.
+        #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "is_zero"))]
+        leak: f32,
     },
     /// Rate of change: (x_n − x_{n−1}) · f_s, in the input's unit per second. Zero on the
     /// first tick.
@@ -331,12 +343,17 @@ impl<N> StageSpec<N> {
                 gain: *gain,
                 cutoff_hz: *cutoff_hz,
             },
-            StageSpec::Gate { input, unless } => StageSpec::Gate {
+            StageSpec::Gate {
+                input,
+                unless,
+                leak,
+            } => StageSpec::Gate {
                 input: f(input)?,
                 unless: Crossing {
                     feature: f(&unless.feature)?,
                     above: unless.above,
                 },
+                leak: *leak,
             },
             StageSpec::Rate { input } => StageSpec::Rate { input: f(input)? },
             StageSpec::Difference { a, b, gain } => StageSpec::Difference {
@@ -406,6 +423,11 @@ pub enum StageError {
         /// The gain.
         gain: f32,
     },
+    /// A gate's leak is not within [0, 1], or not zero but below its resolution of 2⁻¹⁶.
+    Leak {
+        /// The leak.
+        leak: f32,
+    },
     /// A low-pass's warm-up is not finite, not positive, or longer than its sample counter
     /// holds at the detector rate.
     WarmUp {
@@ -469,6 +491,10 @@ impl core::fmt::Display for StageError {
             StageError::Gain { gain } => write!(
                 f,
                 "gain = {gain} must be finite, below 32768 in magnitude, and 0 or at least 2^-16 (0.0000153) in magnitude"
+            ),
+            StageError::Leak { leak } => write!(
+                f,
+                "leak = {leak} must be within [0, 1], and 0 or at least 2^-16 (0.0000153)"
             ),
             StageError::WindowLength { window } => write!(
                 f,
@@ -543,11 +569,13 @@ pub enum StageKind {
         gain: i32,
         warm: u16,
     },
-    /// `input`, or 0 while slot `watch` is above `above` (Q16.16).
+    /// `input`, or `input · leak` (`leak` in Q16.16, within [0, 1]) while slot `watch` is
+    /// above `above` (Q16.16).
     Gate {
         input: u8,
         watch: u8,
         above: i32,
+        leak: i32,
     },
     /// `rate` is the detector rate in Hz, Q8.
     Rate {
@@ -789,10 +817,14 @@ impl Stage {
             StageSpec::Gate {
                 input,
                 unless: Crossing { feature, above },
+                leak,
             } => StageKind::Gate {
                 input,
                 watch: feature,
                 above: level_q16(above)?,
+                leak: q16(leak)
+                    .filter(|q| (0..=1 << 16).contains(q) && (*q != 0 || leak == 0.0))
+                    .ok_or(StageError::Leak { leak })?,
             },
             StageSpec::Rate { input } => StageKind::Rate {
                 input,
@@ -910,9 +942,11 @@ impl Stage {
                 input,
                 watch,
                 above,
+                leak,
             } => {
                 if get(watch) > above {
-                    0
+                    // |input · leak| ≤ 2^47: the fraction fits the input's range.
+                    ((i64::from(get(input)) * i64::from(leak)) >> 16) as i32
                 } else {
                     get(input)
                 }
@@ -1142,11 +1176,13 @@ impl Stage {
                 input,
                 watch,
                 above,
+                leak,
             } => {
                 w.u8(StageTag::Gate as u8);
                 w.u8(input);
                 w.u8(watch);
                 w.u32(above as u32);
+                w.u32(leak as u32);
             }
             StageKind::Rate { input, rate } => {
                 w.u8(StageTag::Rate as u8);
@@ -1250,6 +1286,7 @@ impl Stage {
                 input: r.u8()?,
                 watch: r.u8()?,
                 above: r.u32()? as i32,
+                leak: r.u32()? as i32,
             },
             Some(StageTag::Rate) => StageKind::Rate {
                 input: r.u8()?,
@@ -1359,6 +1396,7 @@ impl StageKind {
             }
             StageKind::Cancel { gain, .. } if gain == i32::MIN => Some("cancellation gain"),
             StageKind::Difference { gain, .. } if gain == i32::MIN => Some("difference gain"),
+            StageKind::Gate { leak, .. } if leak < 0 || leak > 1 << 16 => Some("gate leak"),
             StageKind::Rate { rate, .. } if rate >= 1 << 24 => Some("rate"),
             StageKind::Mean {
                 offset, len, recip, ..
@@ -1483,9 +1521,10 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                 input,
                 watch,
                 above,
+                leak,
             } => write!(
                 f,
-                "Gate {{ input: {input}, watch: {watch}, above: {above} }}"
+                "Gate {{ input: {input}, watch: {watch}, above: {above}, leak: {leak} }}"
             ),
             StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
             StageKind::Difference { a, b, gain } => {
@@ -2320,6 +2359,23 @@ mod tests {
             })
             .is_ok()
         );
+        let gate = |leak| StageSpec::Gate {
+            input: 0,
+            unless: Crossing {
+                feature: 1,
+                above: 0.0,
+            },
+            leak,
+        };
+        for leak in [-0.1, 1.01, f32::NAN, f32::INFINITY, 1e-6] {
+            assert!(
+                matches!(compile(gate(leak)), Err(StageError::Leak { .. })),
+                "{leak}"
+            );
+        }
+        for leak in [0.0, 2e-5, 0.1, 1.0] {
+            assert!(compile(gate(leak)).is_ok(), "{leak}");
+        }
         assert_eq!(
             compile(StageSpec::Ste {
                 input: 0,

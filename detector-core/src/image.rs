@@ -5,7 +5,7 @@
 //!
 //! # Layout
 //!
-//! Little-endian. The magic [`MAGIC`] (`FTD7`, the digit is the layout's version), then
+//! Little-endian. The magic [`MAGIC`] (`FTD8`, the digit is the layout's version), then
 //! each [`Section`] in [`Section::ORDER`], each opened by its tag byte:
 //!
 //! | section | tag | contents |
@@ -27,7 +27,7 @@
 use crate::Name;
 
 /// The first four bytes of every image (the digit is the layout's version).
-pub const MAGIC: [u8; 4] = *b"FTD7";
+pub const MAGIC: [u8; 4] = *b"FTD8";
 
 /// An image's sections, each opened by its tag byte (the discriminant), in
 /// [`Section::ORDER`]: the one statement of the layout that the writer and the loader both

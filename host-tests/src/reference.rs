@@ -209,10 +209,11 @@ enum Stage {
         alpha: f64,
         gain: f64,
     },
-    /// The input, or 0 while the watched slot is above the level.
+    /// The input, or its fraction `leak` while the watched slot is above the level.
     Gate {
         input: usize,
         unless: (usize, f64),
+        leak: f64,
     },
     Rate {
         input: usize,
@@ -482,10 +483,15 @@ impl Model {
                     alpha: low_pass_alpha(rate, f64::from(cutoff_hz)),
                     gain: f64::from(gain),
                 },
-                StageSpec::Gate { input, unless } => Stage::Gate {
+                StageSpec::Gate {
+                    input,
+                    unless,
+                    leak,
+                } => Stage::Gate {
                     input,
                     // The level as the core holds it (16.16).
                     unless: (unless.feature, Signal::from_f32(unless.above).to_f64()),
+                    leak: f64::from(leak),
                 },
                 StageSpec::Rate { input } => Stage::Rate { input, rate },
                 StageSpec::Difference { a, b, gain } => Stage::Difference {
@@ -684,9 +690,10 @@ impl Model {
                 Stage::Gate {
                     input,
                     unless: (watch, above),
+                    leak,
                 } => {
                     if v(*watch) > *above {
-                        0.0
+                        leak * v(*input)
                     } else {
                         v(*input)
                     }

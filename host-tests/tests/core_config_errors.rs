@@ -300,6 +300,7 @@ fn an_unknown_channel() {
             feature: name(feature),
             above,
         },
+        leak: 0.0,
     };
     let watchers: [fn(&str, f32) -> StageSpec<String>; 3] = [until, longer, gate];
     for watcher in watchers {

@@ -140,10 +140,17 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
             .prop_map(|(input, cutoff_hz)| StageSpec::HighPass { input, cutoff_hz }),
         (n(), prop_oneof![1 => any_f32(), 6 => 0.1f32..4.9])
             .prop_map(|(input, cutoff_hz)| StageSpec::Envelope { input, cutoff_hz }),
-        (n(), n(), any_f32()).prop_map(|(input, feature, above)| StageSpec::Gate {
-            input,
-            unless: Crossing { feature, above },
-        }),
+        (
+            n(),
+            n(),
+            any_f32(),
+            prop_oneof![4 => Just(0.0f32), 2 => 0.0f32..1.0, 1 => any_f32()]
+        )
+            .prop_map(|(input, feature, above, leak)| StageSpec::Gate {
+                input,
+                unless: Crossing { feature, above },
+                leak,
+            }),
         (
             n(),
             n(),
@@ -520,7 +527,7 @@ proptest! {
                 8 => StageSpec::Cancel { input: p(0), motion: p(1), gain: *cutoff - 200.0, cutoff_hz: *cutoff },
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
-                11 => StageSpec::Gate { input: p(0), unless: Crossing { feature: p(1), above: *cutoff - 200.0 } },
+                11 => StageSpec::Gate { input: p(0), unless: Crossing { feature: p(1), above: *cutoff - 200.0 }, leak: f32::from(picks[1] % 3) / 2.0 },
                 12 => StageSpec::Positive { input: p(0) },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };

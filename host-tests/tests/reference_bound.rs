@@ -20,7 +20,9 @@
 //!   the magnitude `2⁻¹⁶ + 2⁻¹⁵ max|m| + δ_x + δ_y`, the STE
 //!   `2⁻¹⁵ + N 2⁻²³ max x² + N 2⁻²⁵ max ζ + 2 max|x| δ_x + δ_x²`, the rate
 //!   `2⁻⁸ max|Δx| + 2⁻¹⁶` (its input must be exact), the gate its input's (it watches
-//!   an exact slot, so both models shut it on the same ticks).
+//!   an exact slot, so both models shut it on the same ticks), and where it leaks a
+//!   fraction of its input `2⁻¹⁶ + 2⁻¹⁷ max|x|` more (the product rounded down, the leak
+//!   to 2⁻¹⁶).
 //!
 //! The generator makes every ramp at least `2¹⁴ δ_f` wide, so `(2/span) δ_f ≤ 2⁻¹³` and
 //! `ε_t < 6.5 · 2⁻¹⁵ < 2⁻¹²`. Eq. 14 then moves by at most `ε_t` per context term (each
@@ -334,6 +336,9 @@ fn stage_for(
             // The watched slot exact (the same value in both models, so both shut the gate
             // on the same ticks), channel 0 otherwise; a level within its usual range.
             let w = if info[pick(1)].exact { pick(1) } else { 0 };
+            // Shut: nothing, or a quarter, half or three quarters, or all of it; a
+            // fraction's product is rounded down.
+            let leak = f32::from(p.picks[3] % 5) / 4.0;
             (
                 StageSpec::Gate {
                     input: n(a),
@@ -341,8 +346,12 @@ fn stage_for(
                         feature: n(w),
                         above: f32::from(p.picks[2]) - 128.0,
                     },
+                    leak,
                 },
-                ia,
+                SlotInfo {
+                    exact: ia.exact && (leak == 0.0 || leak == 1.0),
+                    ..ia
+                },
             )
         }
         10 => {

@@ -118,6 +118,7 @@ fn stage(kind: &str) -> StageSpec<String> {
                 feature: name("y"),
                 above: 0.0,
             },
+            leak: 0.0,
         },
         _ => raw("x"),
     }
@@ -139,6 +140,23 @@ proptest! {
             for (i, kind) in kinds.iter().enumerate() {
                 prop_assert_eq!(got[i], want[i], "{} at tick {}", kind, t);
             }
+        }
+    }
+
+    /// A leaking gate, shut, passes its leak's fraction of the input within the leak's
+    /// rounding to 2⁻¹⁶ (|x| 2⁻¹⁷) and the product's, floored (1 LSB); open, the input
+    /// exactly.
+    #[test]
+    fn leaking_gate_within_bound(
+        leak in prop_oneof![Just(0.0f32), 0.0001f32..=1.0],
+        s in samples(4, 31, 60),
+    ) {
+        let c = gate_config(0.0, leak);
+        for (t, ((got, want), row)) in run(&c, &s).iter().zip(&s).enumerate() {
+            let x = Signal::from_bits(row[0]).to_f64();
+            let bound = if row[1] > 0 { x.abs() / 131_072.0 + LSB } else { 0.0 };
+            prop_assert!((got[0] - want[0]).abs() <= bound,
+                "tick {}: engine {} model {} (leak {})", t, got[0], want[0], leak);
         }
     }
 
@@ -497,11 +515,9 @@ fn envelope_by_hand() {
     first_feature_follows(&c, &s, &want);
 }
 
-/// The gate by hand: x passes while y is at or below 0.5, and reads 0 while y is above it
-/// (x 3, 4, 5, 6, 7 with y 0, 0.5, 0.75, -2, 1 give 3, 4, 0, 6, 0).
-#[test]
-fn gate_by_hand() {
-    let c = features_config(
+/// A gate of x, shut while y is above `above`, leaking `leak`.
+fn gate_config(above: f32, leak: f32) -> Config {
+    features_config(
         1000.0,
         vec![(
             "gate",
@@ -509,11 +525,19 @@ fn gate_by_hand() {
                 input: name("x"),
                 unless: Crossing {
                     feature: name("y"),
-                    above: 0.5,
+                    above,
                 },
+                leak,
             },
         )],
-    );
+    )
+}
+
+/// The gate by hand: x passes while y is at or below 0.5, and reads 0 while y is above it
+/// (x 3, 4, 5, 6, 7 with y 0, 0.5, 0.75, -2, 1 give 3, 4, 0, 6, 0).
+#[test]
+fn gate_by_hand() {
+    let c = gate_config(0.5, 0.0);
     let s = [
         (3, 0),
         (4, 1 << 15),
@@ -524,6 +548,20 @@ fn gate_by_hand() {
     .map(|(x, y)| [x << 16, y, 0, 0]);
     let got: Vec<f64> = run(&c, &s).into_iter().map(|(g, _)| g[0]).collect();
     assert_eq!(got, [3.0, 4.0, 0.0, 6.0, 0.0]);
+}
+
+/// A leaking gate passes its fraction of the input while shut: with a leak of 0.1, x 3,
+/// -5, 40 with y 0, 1, 1 give 3, -0.5 and 4, each rounded down to 2^-16 (the leak is
+/// 6554 / 65536, and the product is floored).
+#[test]
+fn leaking_gate_by_hand() {
+    let c = gate_config(0.5, 0.1);
+    let s = [(3, 0), (-5, 1 << 16), (40, 1 << 16)].map(|(x, y)| [x << 16, y, 0, 0]);
+    let got: Vec<f64> = run(&c, &s).into_iter().map(|(g, _)| g[0]).collect();
+    let leak = 6554.0 / 65536.0;
+    let floored = |v: f64| (v * leak * 65536.0).floor() / 65536.0;
+    assert_eq!(got, [3.0, floored(-5.0), floored(40.0)]);
+    assert!((got[1] + 0.5).abs() < 1e-4 && (got[2] - 4.0).abs() < 1e-3);
 }
 
 /// The low-pass warms up as the mean of what it has seen: at f_c = 1 Hz and f_s = 1 kHz

@@ -344,13 +344,23 @@ pub fn slot_errors(config: &Config, stats: &[Stats]) -> Vec<f64> {
                 2.0 * d(input) + low_pass(*cutoff_hz, m(input))
             }
             StageSpec::Envelope { input, .. } => d(input) + LSB + m(input) / 1_048_576.0,
-            StageSpec::Gate { input, unless } => {
+            StageSpec::Gate {
+                input,
+                unless,
+                leak,
+            } => {
                 let undecided = if d(&unless.feature) > 0.0 {
                     m(input)
                 } else {
                     0.0
                 };
-                d(input) + undecided
+                // A leak's product: its rounding down, and the leak's own to 2^-16.
+                let leaked = if *leak == 0.0 {
+                    0.0
+                } else {
+                    LSB + m(input) / 131_072.0
+                };
+                d(input) + undecided + leaked
             }
             StageSpec::Cancel {
                 input,
