@@ -2292,6 +2292,40 @@ mod tests {
         }
     }
 
+    /// An image's gate whose leak is out of [0, 1] is refused, naming it; one within it
+    /// reads back as written.
+    #[test]
+    fn an_image_gate_leaks_within_its_range() {
+        struct Bytes(std::vec::Vec<u8>);
+        impl Sink for Bytes {
+            fn put(&mut self, bytes: &[u8]) {
+                self.0.extend_from_slice(bytes);
+            }
+        }
+        for (leak, ok) in [
+            (0, true),
+            (1 << 16, true),
+            (6554, true),
+            (-1, false),
+            ((1 << 16) + 1, false),
+        ] {
+            let stage = Stage(StageKind::Gate {
+                input: 0,
+                watch: 1,
+                above: 0,
+                leak,
+            });
+            let mut w = Bytes(std::vec::Vec::new());
+            stage.write_image(&mut w);
+            let read = Stage::read_image(&mut Reader::new(&w.0), MAX_SLOTS);
+            if ok {
+                assert_eq!(read, Ok(stage), "{leak}");
+            } else {
+                assert_eq!(read, Err(ImageError::Invalid("gate leak")), "{leak}");
+            }
+        }
+    }
+
     #[test]
     fn bad_stage_parameters() {
         let mut weights = [0u32; WINDOW_POOL];
