@@ -168,9 +168,53 @@ pub struct CorpusReport {
     pub false_by_scenario: Vec<(String, usize, f64)>,
     /// How long after an event's end a confirmation counted for it (ms).
     pub after_ms: f64,
-    /// What went wrong, a line each: the recording, the event and time, the outcome; the
-    /// false confirmations last.
-    pub failures: Vec<(String, String)>,
+    /// What went wrong, every labelled event not right, then every false confirmation.
+    pub failures: Vec<CorpusFailure>,
+}
+
+/// One thing that went wrong in a recording.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CorpusFailure {
+    /// The recording's name.
+    pub recording: String,
+    /// The labelled event, or the event confirmed outside every labelled one.
+    pub event: String,
+    /// The labelled event's onset, or the time of the confirmation outside (s).
+    pub at_s: f64,
+    /// The labelled event's outcome; `None` for a confirmation outside every labelled event.
+    pub outcome: Option<Outcome>,
+}
+
+impl CorpusFailure {
+    /// What the failure is grouped by when the first few of each are shown: its event, or
+    /// the time outside events.
+    fn kind(&self) -> &str {
+        match self.outcome {
+            Some(_) => &self.event,
+            None => "outside events",
+        }
+    }
+
+    /// What went wrong, in words.
+    fn what(&self) -> String {
+        match &self.outcome {
+            Some(outcome) => outcome.to_string(),
+            None => "confirmed outside every labelled event".to_string(),
+        }
+    }
+}
+
+impl std::fmt::Display for CorpusFailure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (recording, event, t) = (&self.recording, &self.event, self.at_s);
+        match &self.outcome {
+            Some(outcome) => write!(f, "{recording}: {event} at {t:.3} s: {outcome}"),
+            None => write!(
+                f,
+                "{recording}: {event} confirmed at {t:.3} s, outside every labelled event"
+            ),
+        }
+    }
 }
 
 impl CorpusReport {
@@ -199,23 +243,24 @@ impl CorpusReport {
                     outcomes[i].push((outcome.clone(), r.scenario.as_deref()));
                 }
                 if !outcome.is_right() {
-                    failures.push((
-                        event.clone(),
-                        format!("{}: {event} at {:.3} s: {outcome}", r.name, onset),
-                    ));
+                    failures.push(CorpusFailure {
+                        recording: r.name.clone(),
+                        event: event.clone(),
+                        at_s: *onset,
+                        outcome: Some(outcome.clone()),
+                    });
                 }
             }
             for (event, t) in &r.score.false_confirmations {
                 if let Some(i) = event_names.iter().position(|n| n == event) {
                     false_by_event[i] += 1;
                 }
-                false_alarms.push((
-                    "outside events".to_string(),
-                    format!(
-                        "{}: {event} confirmed at {t:.3} s, outside every labelled event",
-                        r.name
-                    ),
-                ));
+                false_alarms.push(CorpusFailure {
+                    recording: r.name.clone(),
+                    event: event.clone(),
+                    at_s: *t,
+                    outcome: None,
+                });
             }
         }
         let false_confirmations = false_alarms.len();
@@ -287,11 +332,11 @@ impl CorpusReport {
                 "what went wrong (at most {SHOWN_FAILURES} of each kind):"
             )?;
             let mut shown: std::collections::HashMap<&str, usize> = Default::default();
-            for (kind, line) in &self.failures {
-                let n = shown.entry(kind).or_default();
+            for failure in &self.failures {
+                let n = shown.entry(failure.kind()).or_default();
                 *n += 1;
                 if *n <= SHOWN_FAILURES {
-                    writeln!(out, "  {line}")?;
+                    writeln!(out, "  {failure}")?;
                 }
             }
         }
@@ -300,7 +345,9 @@ impl CorpusReport {
 
     /// The report as JSON: the simulated evaluation's fields where they coincide (`config`,
     /// `false_alarms`, `false_alarms_per_hour`; `events` holds what `scenarios` holds
-    /// there, one entry per event name, `runs` counting labelled events).
+    /// there, one entry per event name, `runs` counting labelled events; `failures` every
+    /// labelled event not right and every false confirmation, each with its recording, its
+    /// event, its time and what went wrong).
     pub fn json(&self, config: &str) -> serde_json::Value {
         serde_json::json!({
             "config": config,
@@ -318,6 +365,16 @@ impl CorpusReport {
                     "scenario": scenario,
                     "false_alarms": n,
                     "outside_event_hours": hours,
+                }))
+                .collect::<Vec<_>>(),
+            "failures": self
+                .failures
+                .iter()
+                .map(|f| serde_json::json!({
+                    "recording": f.recording,
+                    "event": f.event,
+                    "at_s": f.at_s,
+                    "outcome": f.what(),
                 }))
                 .collect::<Vec<_>>(),
         })
@@ -382,5 +439,37 @@ mod tests {
         let report = CorpusReport::tally(&events, &unnamed, 100.0);
         assert!(report.events[0].bins.is_empty() && report.events[0].binned_by.is_empty());
         assert!(report.false_by_scenario.is_empty());
+    }
+
+    /// Every failure is in the JSON report, with its recording, event, time and outcome,
+    /// the false confirmations after the events; the text shows the first few of each kind.
+    #[test]
+    fn every_failure_is_listed_with_its_recording_and_time() {
+        let mut missed = recording(Some("soft"), Outcome::Missed);
+        missed.score.false_confirmations = (0..5)
+            .map(|k| ("contact".to_string(), 1.5 + f64::from(k)))
+            .collect();
+        let report = CorpusReport::tally(&["contact".to_string()], &[missed], 100.0);
+        let json = report.json("c.toml");
+        let listed = json["failures"].as_array().expect("a list");
+        assert_eq!(listed.len(), 6);
+        assert_eq!(listed[0]["recording"], "Some(\"soft\").csv");
+        assert_eq!(listed[0]["event"], "contact");
+        assert_eq!(listed[0]["at_s"], 0.02);
+        assert_eq!(listed[0]["outcome"], Outcome::Missed.to_string());
+        assert_eq!(listed[5]["at_s"], 5.5);
+        assert_eq!(
+            listed[5]["outcome"],
+            "confirmed outside every labelled event"
+        );
+        let mut text = Vec::new();
+        report.write(&mut text).expect("writes");
+        let text = String::from_utf8(text).expect("UTF-8");
+        assert!(text.contains("contact at 0.020 s: "));
+        assert!(text.contains("contact confirmed at 3.500 s, outside every labelled event"));
+        assert!(
+            !text.contains("confirmed at 4.500 s"),
+            "more than {SHOWN_FAILURES} shown"
+        );
     }
 }
