@@ -551,15 +551,7 @@ impl Cdf {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// An image in memory.
-    struct Bytes(std::vec::Vec<u8>);
-
-    impl Sink for Bytes {
-        fn put(&mut self, bytes: &[u8]) {
-            self.0.extend_from_slice(bytes);
-        }
-    }
+    use crate::image::Bytes;
 
     fn eval(spec: CdfSpec, x: f32) -> f32 {
         Cdf::new(&spec)

@@ -945,8 +945,8 @@ impl Stage {
                 leak,
             } => {
                 if get(watch) > above {
-                    // |input · leak| ≤ 2^47: the fraction fits the input's range.
-                    ((i64::from(get(input)) * i64::from(leak)) >> 16) as i32
+                    // A leak within [0, 1] keeps the product within the input's range.
+                    scale_q16(get(input), leak) as i32
                 } else {
                     get(input)
                 }
@@ -2296,12 +2296,7 @@ mod tests {
     /// reads back as written.
     #[test]
     fn an_image_gate_leaks_within_its_range() {
-        struct Bytes(std::vec::Vec<u8>);
-        impl Sink for Bytes {
-            fn put(&mut self, bytes: &[u8]) {
-                self.0.extend_from_slice(bytes);
-            }
-        }
+        use crate::image::Bytes;
         for (leak, ok) in [
             (0, true),
             (1 << 16, true),

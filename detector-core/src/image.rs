@@ -258,3 +258,14 @@ pub trait Sink {
         self.put(n.as_bytes());
     }
 }
+
+/// An image written in memory, for tests of the items that write and read themselves.
+#[cfg(test)]
+pub(crate) struct Bytes(pub(crate) std::vec::Vec<u8>);
+
+#[cfg(test)]
+impl Sink for Bytes {
+    fn put(&mut self, bytes: &[u8]) {
+        self.0.extend_from_slice(bytes);
+    }
+}
