@@ -1,9 +1,10 @@
 //! The default detector's contact paths, each for the evidence it was added for. A very
 //! soft object at 1 cm/s on a film whose amplifier is AC-coupled: the film reads the
 //! steady loading as a rate that dies away, and the contact is found on the force sensor
-//! (the paper's "filtered force", `force_push_steady`). Without that path the film's
+//! (the paper's "filtered force", `force_push_clear`). Without that path the film's
 //! paths alone miss some of the same runs. And a finger braking onto a soft object: its
-//! film is held only to the jerk its braking can read, which pulls the skin off the film.
+//! film is held only to the jerk its braking can read, which pulls the skin off the film,
+//! and its force sensor's push counts beyond what the fingertip's own inertia can leave.
 
 use detector_build::Config;
 use detector_core::Detector;
@@ -13,7 +14,7 @@ use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
-const FORCE_TERM: &str = "    { feature = \"force_push_steady\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
+const FORCE_TERM: &str = "    { feature = \"force_push_clear\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
 
 fn detector(toml: &str) -> Detector {
     detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
@@ -134,5 +135,123 @@ fn a_braking_finger_finds_soft_objects_on_its_film() {
         late(&any_direction) > 0,
         "a bound of any direction finds all {} within 20 ms too: the test no longer shows the direction's part",
         soft.len()
+    );
+}
+
+/// The bound the default holds the force sensor's push to while the commanded speed
+/// changes, as written in `configs/approach.toml`.
+const INERTIA_BOUND: &str =
+    "stage = { difference = { a = \"force_push_quiet\", b = \"speed_unsettled\", gain = 0.24 } }";
+/// The push judged only once the commanded speed has held steady.
+const STEADY_ONLY: &str = "stage = { gate = { input = \"force_push_quiet\", unless = { feature = \"speed_unsettled\", above = 0.5 } } }";
+/// The push with no bound at all.
+const UNBOUNDED: &str =
+    "stage = { difference = { a = \"force_push_quiet\", b = \"speed_unsettled\", gain = 0.0 } }";
+
+/// 300 ms of a finger approaching at `v0` [m/s] whose commanded speed changes at `accel`
+/// [m/s^2] from 100 ms to 225 ms (a braking from 50 mm/s at -0.4 comes to rest), its arm
+/// following the commanded acceleration through its loops (a 15 Hz lag), with a fingertip
+/// of `mass_kg` above the force sensor; from 150 ms on, when `stiffness` is given, it presses
+/// into an object of that stiffness [N/m]. The force sensor's noise is 1.5 cN RMS; the film
+/// and the accelerometer read nothing, so that the force sensor alone can find a contact.
+fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace {
+    let rate = 5000.0;
+    let dt = 1.0 / rate;
+    let t: Vec<f64> = (0..1500).map(|k| f64::from(k) / rate).collect();
+    let acc_des: Vec<f64> = t
+        .iter()
+        .map(|&s| {
+            if (0.1..0.225).contains(&s) {
+                accel
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let vel_des: Vec<f64> = t
+        .iter()
+        .map(|&s| v0 + accel * (s - 0.1).clamp(0.0, 0.125))
+        .collect();
+    let lag = 1.0 / (2.0 * std::f64::consts::PI * 15.0);
+    let mut acc = 0.0;
+    let mut pressed = 0.0;
+    // A uniform noise of 1.5 cN RMS from a fixed linear congruential sequence.
+    let mut state: u32 = 12345;
+    let mut noise = move || {
+        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        (f64::from(state >> 8) / f64::from(1u32 << 24) - 0.5) * 0.015 * 12f64.sqrt()
+    };
+    let force_x: Vec<f64> = t
+        .iter()
+        .zip(&acc_des)
+        .zip(&vel_des)
+        .map(|((&s, &a), &v)| {
+            acc += (a - acc) * dt / (lag + dt);
+            if s >= 0.15 {
+                pressed += v * dt;
+            }
+            -mass_kg * acc - stiffness.map_or(0.0, |k| k * pressed) + noise()
+        })
+        .collect();
+    let zeros = vec![0.0; t.len()];
+    let mut channels: Vec<(String, Vec<f64>)> = [
+        "force_y",
+        "skin_accel",
+        "stress_rate",
+        "pos_err_x",
+        "pos_err_y",
+        "vel_des_y",
+        "acc_des_y",
+    ]
+    .iter()
+    .map(|c| (c.to_string(), zeros.clone()))
+    .collect();
+    channels.push(("force_x".into(), force_x));
+    channels.push(("vel_des_x".into(), vel_des));
+    channels.push(("acc_des_x".into(), acc_des));
+    Trace::from_columns("approach", t, channels).expect("a trace")
+}
+
+/// The events `detector` confirms on `trace`.
+fn confirmed(detector: &Detector, trace: &Trace) -> Vec<String> {
+    replay::replay(detector, trace, |_, _, _| {})
+        .expect("replays")
+        .iter()
+        .filter(|d| d.is_confirm())
+        .map(|d| d.event.to_string())
+        .collect()
+}
+
+#[test]
+fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
+    assert!(APPROACH_TOML.contains(INERTIA_BOUND), "the default's bound");
+    let default = detector(APPROACH_TOML);
+    // A 75 g fingertip, the envelope's heaviest, braking onto a soft object.
+    let contact = approach(0.05, -0.4, 0.075, Some(150.0));
+    assert_eq!(
+        confirmed(&default, &contact),
+        ["contact"],
+        "a braking contact"
+    );
+    let steady_only = detector(&APPROACH_TOML.replacen(INERTIA_BOUND, STEADY_ONLY, 1));
+    assert!(
+        confirmed(&steady_only, &contact).is_empty(),
+        "the push judged only while the speed holds finds the braking contact too: the test no longer shows the bound's part"
+    );
+    // With nothing to touch: the same braking, and a finger speeding up towards the object
+    // at 0.8 m/s^2, whose inertia, 40 g more than `force_ext` cancels, pushes the fingertip
+    // back by 3.2 cN.
+    let braking = approach(0.05, -0.4, 0.075, None);
+    assert!(confirmed(&default, &braking).is_empty(), "a braking finger");
+    let speeding = approach(0.02, 0.8, 0.075, None);
+    assert!(
+        confirmed(&default, &speeding).is_empty(),
+        "a finger speeding up"
+    );
+    let unbounded = detector(&APPROACH_TOML.replacen(INERTIA_BOUND, UNBOUNDED, 1));
+    assert_eq!(
+        confirmed(&unbounded, &speeding),
+        ["contact"],
+        "the unbounded push reads no contact in the finger speeding up: the test no longer shows the bound's part"
     );
 }
