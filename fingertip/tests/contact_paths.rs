@@ -12,6 +12,9 @@ use fingertip::score::{Outcome, classify};
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
+use rand::rngs::Xoshiro256PlusPlus;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
 const FORCE_TERM: &str = "    { feature = \"force_push_clear\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
@@ -175,12 +178,9 @@ fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace 
     let lag = 1.0 / (2.0 * std::f64::consts::PI * 15.0);
     let mut acc = 0.0;
     let mut pressed = 0.0;
-    // A uniform noise of 1.5 cN RMS from a fixed linear congruential sequence.
-    let mut state: u32 = 12345;
-    let mut noise = move || {
-        state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-        (f64::from(state >> 8) / f64::from(1u32 << 24) - 0.5) * 0.015 * 12f64.sqrt()
-    };
+    // White noise of 1.5 cN RMS, the same on every call.
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
+    let mut noise = move || 0.015 * rng.sample::<f64, _>(StandardNormal);
     let force_x: Vec<f64> = t
         .iter()
         .zip(&acc_des)
