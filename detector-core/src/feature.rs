@@ -135,18 +135,18 @@ pub enum StageSpec<N> {
         /// Cut-off of the motion's low-pass, above 0 and below half the detector rate.
         cutoff_hz: f32,
     },
-    /// The input while another feature stays at or below a level, else 0 (or the fraction
-    /// `leak` of the input): evidence that means something only in a given state, e.g. a
-    /// vibration judged against the usual one only while the commanded motion, which sets
-    /// the usual one, holds steady; or evidence that weighs less in a state, e.g. a jolt
-    /// while the arm's own loops may jolt it. The output is the input exactly (or its
-    /// fraction), in the input's unit; the watched feature's unit is its own, never traded
-    /// against the input's.
+    /// The input while another feature stays at or below a level (or at or above one),
+    /// else 0 (or the fraction `leak` of the input): evidence that means something only in
+    /// a given state, e.g. a vibration judged against the usual one only while the
+    /// commanded motion, which sets the usual one, holds steady; or evidence that weighs
+    /// less in a state, e.g. a jolt while the arm's own loops may jolt it. The output is
+    /// the input exactly (or its fraction), in the input's unit; the watched feature's unit
+    /// is its own, never traded against the input's.
     Gate {
         /// Source channel or feature.
         input: N,
-        /// The gate shuts while this feature is above its level.
-        unless: Crossing<N>,
+        /// The gate shuts while this feature is above its level, or below it.
+        unless: Shut<N>,
         /// The fraction of the input a shut gate passes, within [0, 1], in steps of 2⁻¹⁶;
         /// 0 (nothing) when absent.
         #[cfg_attr(feature = "serde", serde(default, skip_serializing_if = "is_zero"))]
@@ -222,6 +222,28 @@ pub struct Crossing<N> {
     pub feature: N,
     /// The level, in the watched feature's unit; below 32768 in magnitude.
     pub above: f32,
+}
+
+/// Where a gate shuts (see [`StageSpec::Gate`]'s `unless`): while a feature is above one
+/// level, or below one. Exactly one of `above` and `below` is given.
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
+#[cfg_attr(feature = "serde", serde(deny_unknown_fields))]
+pub struct Shut<N> {
+    /// The channel or earlier feature watched.
+    pub feature: N,
+    /// Shut while the feature is above this level, in its unit; below 32768 in magnitude.
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
+    pub above: Option<f32>,
+    /// Shut while the feature is below this level, in its unit; below 32768 in magnitude.
+    #[cfg_attr(
+        feature = "serde",
+        serde(default, skip_serializing_if = "Option::is_none")
+    )]
+    pub below: Option<f32>,
 }
 
 /// A low-pass's longer warm-up (see [`StageSpec::LowPass`]'s `warm_up_longer`): taken when
@@ -349,9 +371,10 @@ impl<N> StageSpec<N> {
                 leak,
             } => StageSpec::Gate {
                 input: f(input)?,
-                unless: Crossing {
+                unless: Shut {
                     feature: f(&unless.feature)?,
                     above: unless.above,
+                    below: unless.below,
                 },
                 leak: *leak,
             },
@@ -448,8 +471,10 @@ pub enum StageError {
     /// magnitude.
     Level {
         /// The requested level.
-        above: f32,
+        level: f32,
     },
+    /// A gate's `unless` gives both `above` and `below`, or neither.
+    GateSide,
     /// An STE or mean window is empty or longer than [`MAX_WINDOW`].
     WindowLength {
         /// The requested length.
@@ -484,10 +509,13 @@ impl core::fmt::Display for StageError {
                 f,
                 "warm_up_longer's warm_up_ms = {longer_ms} must exceed the stage's own warm_up_ms ({warm_up_ms}), which it needs"
             ),
-            StageError::Level { above } => write!(
+            StageError::Level { level } => write!(
                 f,
-                "above = {above} must be finite and below 32768 in magnitude"
+                "the level {level} must be finite and below 32768 in magnitude"
             ),
+            StageError::GateSide => {
+                write!(f, "a gate's unless needs exactly one of above and below")
+            }
             StageError::Gain { gain } => write!(
                 f,
                 "gain = {gain} must be finite, below 32768 in magnitude, and 0 or at least 2^-16 (0.0000153) in magnitude"
@@ -570,11 +598,12 @@ pub enum StageKind {
         warm: u16,
     },
     /// `input`, or `input · leak` (`leak` in Q16.16, within [0, 1]) while slot `watch` is
-    /// above `above` (Q16.16).
+    /// above `level` (Q16.16), or below it if `below`.
     Gate {
         input: u8,
         watch: u8,
-        above: i32,
+        level: i32,
+        below: bool,
         leak: i32,
     },
     /// `rate` is the detector rate in Hz, Q8.
@@ -816,12 +845,21 @@ impl Stage {
             }
             StageSpec::Gate {
                 input,
-                unless: Crossing { feature, above },
+                unless:
+                    Shut {
+                        feature,
+                        above,
+                        below,
+                    },
                 leak,
             } => StageKind::Gate {
                 input,
                 watch: feature,
-                above: level_q16(above)?,
+                level: level_q16(match (above, below) {
+                    (Some(level), None) | (None, Some(level)) => level,
+                    _ => return Err(StageError::GateSide),
+                })?,
+                below: below.is_some(),
                 leak: q16(leak)
                     .filter(|q| (0..=1 << 16).contains(q) && (*q != 0 || leak == 0.0))
                     .ok_or(StageError::Leak { leak })?,
@@ -941,10 +979,17 @@ impl Stage {
             StageKind::Gate {
                 input,
                 watch,
-                above,
+                level,
+                below,
                 leak,
             } => {
-                if get(watch) > above {
+                // Generated code knows `below` and keeps one comparison.
+                let shut = if below {
+                    get(watch) < level
+                } else {
+                    get(watch) > level
+                };
+                if shut {
                     // A leak within [0, 1] keeps the product within the input's range.
                     scale_q16(get(input), leak) as i32
                 } else {
@@ -1175,13 +1220,18 @@ impl Stage {
             StageKind::Gate {
                 input,
                 watch,
-                above,
+                level,
+                below,
                 leak,
             } => {
-                w.u8(StageTag::Gate as u8);
+                w.u8(if below {
+                    StageTag::GateBelow
+                } else {
+                    StageTag::Gate
+                } as u8);
                 w.u8(input);
                 w.u8(watch);
-                w.u32(above as u32);
+                w.u32(level as u32);
                 w.u32(leak as u32);
             }
             StageKind::Rate { input, rate } => {
@@ -1282,10 +1332,11 @@ impl Stage {
                     warm: mean_gain_samples(alpha),
                 }
             }
-            Some(StageTag::Gate) => StageKind::Gate {
+            Some(tag @ (StageTag::Gate | StageTag::GateBelow)) => StageKind::Gate {
                 input: r.u8()?,
                 watch: r.u8()?,
-                above: r.u32()? as i32,
+                level: r.u32()? as i32,
+                below: matches!(tag, StageTag::GateBelow),
                 leak: r.u32()? as i32,
             },
             Some(StageTag::Rate) => StageKind::Rate {
@@ -1449,10 +1500,11 @@ enum StageTag {
     Gate = 12,
     Positive = 13,
     LowPassLonger = 14,
+    GateBelow = 15,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 15] = [
+    const ALL: [StageTag; 16] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1468,6 +1520,7 @@ impl StageTag {
         StageTag::Gate,
         StageTag::Positive,
         StageTag::LowPassLonger,
+        StageTag::GateBelow,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1520,11 +1573,12 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
             StageKind::Gate {
                 input,
                 watch,
-                above,
+                level,
+                below,
                 leak,
             } => write!(
                 f,
-                "Gate {{ input: {input}, watch: {watch}, above: {above}, leak: {leak} }}"
+                "Gate {{ input: {input}, watch: {watch}, level: {level}, below: {below}, leak: {leak} }}"
             ),
             StageKind::Rate { input, rate } => write!(f, "Rate {{ input: {input}, rate: {rate} }}"),
             StageKind::Difference { a, b, gain } => {
@@ -1622,9 +1676,9 @@ fn q16(v: f32) -> Option<i32> {
     (v.is_finite() && v.abs() < 32768.0).then(|| crate::Signal::from_f32(v).to_bits())
 }
 
-/// A level a low-pass's warm-up watches, in Q16.16.
-fn level_q16(above: f32) -> Result<i32, StageError> {
-    q16(above).ok_or(StageError::Level { above })
+/// A level a low-pass's warm-up or a gate watches, in Q16.16.
+fn level_q16(level: f32) -> Result<i32, StageError> {
+    q16(level).ok_or(StageError::Level { level })
 }
 
 /// A cancellation gain in Q16.16: within the range, and zero or at least one step.
@@ -2293,30 +2347,33 @@ mod tests {
     }
 
     /// An image's gate whose leak is out of [0, 1] is refused, naming it; one within it
-    /// reads back as written.
+    /// reads back as written, shut on the same side of its level.
     #[test]
     fn an_image_gate_leaks_within_its_range() {
         use crate::image::Bytes;
-        for (leak, ok) in [
-            (0, true),
-            (1 << 16, true),
-            (6554, true),
-            (-1, false),
-            ((1 << 16) + 1, false),
-        ] {
-            let stage = Stage(StageKind::Gate {
-                input: 0,
-                watch: 1,
-                above: 0,
-                leak,
-            });
-            let mut w = Bytes(std::vec::Vec::new());
-            stage.write_image(&mut w);
-            let read = Stage::read_image(&mut Reader::new(&w.0), MAX_SLOTS);
-            if ok {
-                assert_eq!(read, Ok(stage), "{leak}");
-            } else {
-                assert_eq!(read, Err(ImageError::Invalid("gate leak")), "{leak}");
+        for below in [false, true] {
+            for (leak, ok) in [
+                (0, true),
+                (1 << 16, true),
+                (6554, true),
+                (-1, false),
+                ((1 << 16) + 1, false),
+            ] {
+                let stage = Stage(StageKind::Gate {
+                    input: 0,
+                    watch: 1,
+                    level: -3 << 16,
+                    below,
+                    leak,
+                });
+                let mut w = Bytes(std::vec::Vec::new());
+                stage.write_image(&mut w);
+                let read = Stage::read_image(&mut Reader::new(&w.0), MAX_SLOTS);
+                if ok {
+                    assert_eq!(read, Ok(stage), "{leak} {below}");
+                } else {
+                    assert_eq!(read, Err(ImageError::Invalid("gate leak")), "{leak}");
+                }
             }
         }
     }
@@ -2390,9 +2447,10 @@ mod tests {
         );
         let gate = |leak| StageSpec::Gate {
             input: 0,
-            unless: Crossing {
+            unless: Shut {
                 feature: 1,
-                above: 0.0,
+                above: Some(0.0),
+                below: None,
             },
             leak,
         };

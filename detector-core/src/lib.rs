@@ -18,7 +18,7 @@ pub mod __private;
 
 pub use cdf::{Cdf, CdfError, CdfSpec};
 pub use detector::{Detector, TermConfidences};
-pub use feature::{Crossing, LongerWarmUp, Stage, StageError, StageSpec, Window};
+pub use feature::{Crossing, LongerWarmUp, Shut, Stage, StageError, StageSpec, Window};
 pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 pub use state::{

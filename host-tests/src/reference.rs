@@ -209,10 +209,12 @@ enum Stage {
         alpha: f64,
         gain: f64,
     },
-    /// The input, or its fraction `leak` while the watched slot is above the level.
+    /// The input, or its fraction `leak` while the watched slot is above the level (below
+    /// it, if `below`).
     Gate {
         input: usize,
         unless: (usize, f64),
+        below: bool,
         leak: f64,
     },
     Rate {
@@ -490,7 +492,11 @@ impl Model {
                 } => Stage::Gate {
                     input,
                     // The level as the core holds it (16.16).
-                    unless: (unless.feature, Signal::from_f32(unless.above).to_f64()),
+                    unless: (
+                        unless.feature,
+                        Signal::from_f32(unless.above.or(unless.below).unwrap_or(0.0)).to_f64(),
+                    ),
+                    below: unless.below.is_some(),
                     leak: f64::from(leak),
                 },
                 StageSpec::Rate { input } => Stage::Rate { input, rate },
@@ -689,14 +695,16 @@ impl Model {
                 } => v(*input) - gain * st.low_pass(v(*motion), *alpha, WARM_LIMIT),
                 Stage::Gate {
                     input,
-                    unless: (watch, above),
+                    unless: (watch, level),
+                    below,
                     leak,
                 } => {
-                    if v(*watch) > *above {
-                        leak * v(*input)
+                    let shut = if *below {
+                        v(*watch) < *level
                     } else {
-                        v(*input)
-                    }
+                        v(*watch) > *level
+                    };
+                    if shut { leak * v(*input) } else { v(*input) }
                 }
                 Stage::Rate { input, rate } => {
                     let x = v(*input);

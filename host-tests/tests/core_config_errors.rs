@@ -8,7 +8,9 @@ mod support;
 
 use detector_build::LoadError;
 use detector_build::{Config, ConfigError, Item, Problem, Warning};
-use detector_core::{CdfError, CdfSpec, Crossing, LongerWarmUp, StageError, StageSpec, Window};
+use detector_core::{
+    CdfError, CdfSpec, Crossing, LongerWarmUp, Shut, StageError, StageSpec, Window,
+};
 use proptest::prelude::*;
 use support::*;
 
@@ -296,13 +298,23 @@ fn an_unknown_channel() {
     };
     let gate = |feature: &str, above: f32| StageSpec::Gate {
         input: name("a"),
-        unless: Crossing {
+        unless: Shut {
             feature: name(feature),
-            above,
+            above: Some(above),
+            below: None,
         },
         leak: 0.0,
     };
-    let watchers: [fn(&str, f32) -> StageSpec<String>; 3] = [until, longer, gate];
+    let gate_below = |feature: &str, below: f32| StageSpec::Gate {
+        input: name("a"),
+        unless: Shut {
+            feature: name(feature),
+            above: None,
+            below: Some(below),
+        },
+        leak: 0.0,
+    };
+    let watchers: [fn(&str, f32) -> StageSpec<String>; 4] = [until, longer, gate, gate_below];
     for watcher in watchers {
         let e = reject(
             |c| c.features[0].stage = watcher("fb", 1.0),
@@ -312,7 +324,7 @@ fn an_unknown_channel() {
         for above in [f32::NAN, f32::INFINITY, 40000.0, -40000.0] {
             let e = reject(
                 |c| c.features[0].stage = watcher("b", above),
-                &["feature 'fa'", "above = "],
+                &["feature 'fa'", "the level "],
             );
             assert_eq!(e.item, Item::Feature(name("fa")));
             assert!(
@@ -323,6 +335,28 @@ fn an_unknown_channel() {
         let mut config = good();
         config.features[0].stage = watcher("b", -1.0);
         assert!(detector_build::build(&config).is_ok());
+    }
+}
+
+/// A gate shuts on one side of its level: above it or below it, never both or neither.
+#[test]
+fn a_gate_shuts_on_one_side() {
+    for (above, below) in [(Some(1.0), Some(2.0)), (None, None)] {
+        let e = reject(
+            |c| {
+                c.features[0].stage = StageSpec::Gate {
+                    input: name("a"),
+                    unless: Shut {
+                        feature: name("b"),
+                        above,
+                        below,
+                    },
+                    leak: 0.0,
+                }
+            },
+            &["feature 'fa'", "exactly one of above and below"],
+        );
+        assert_eq!(e.problem, Problem::Stage(StageError::GateSide));
     }
 }
 

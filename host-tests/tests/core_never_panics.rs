@@ -28,7 +28,7 @@ use detector_build::{
     ChannelSpec, Config, ContextTerm, EventSpec, FeatureSpec, LevelSpec, PhaseSpec, SensorTerm,
 };
 use detector_core::{
-    Cdf, CdfSpec, Crossing, Detector, EventId, LongerWarmUp, Signal, StageSpec, Window,
+    Cdf, CdfSpec, Crossing, Detector, EventId, LongerWarmUp, Shut, Signal, StageSpec, Window,
 };
 use proptest::prelude::*;
 use support::*;
@@ -143,12 +143,17 @@ fn any_stage() -> impl Strategy<Value = StageSpec<Ref>> {
         (
             n(),
             n(),
-            any_f32(),
+            prop::option::of(any_f32()),
+            prop::option::of(any_f32()),
             prop_oneof![4 => Just(0.0f32), 2 => 0.0f32..1.0, 1 => any_f32()]
         )
-            .prop_map(|(input, feature, above, leak)| StageSpec::Gate {
+            .prop_map(|(input, feature, above, below, leak)| StageSpec::Gate {
                 input,
-                unless: Crossing { feature, above },
+                unless: Shut {
+                    feature,
+                    above,
+                    below
+                },
                 leak,
             }),
         (
@@ -527,7 +532,11 @@ proptest! {
                 8 => StageSpec::Cancel { input: p(0), motion: p(1), gain: *cutoff - 200.0, cutoff_hz: *cutoff },
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
-                11 => StageSpec::Gate { input: p(0), unless: Crossing { feature: p(1), above: *cutoff - 200.0 }, leak: f32::from(picks[1] % 3) / 2.0 },
+                11 => {
+                    let level = Some(*cutoff - 200.0);
+                    let (above, below) = if picks[1].is_multiple_of(2) { (level, None) } else { (None, level) };
+                    StageSpec::Gate { input: p(0), unless: Shut { feature: p(1), above, below }, leak: f32::from(picks[1] % 3) / 2.0 }
+                }
                 12 => StageSpec::Positive { input: p(0) },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },
             };

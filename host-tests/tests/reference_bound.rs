@@ -69,7 +69,7 @@ mod support;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use detector_build::{Config, EventSpec};
-use detector_core::{CdfSpec, Crossing, LongerWarmUp, Signal, StageSpec, Window};
+use detector_core::{CdfSpec, Crossing, LongerWarmUp, Shut, Signal, StageSpec, Window};
 use host_tests::reference::{Model, cdf};
 use proptest::prelude::*;
 use support::*;
@@ -342,9 +342,18 @@ fn stage_for(
             (
                 StageSpec::Gate {
                     input: n(a),
-                    unless: Crossing {
-                        feature: n(w),
-                        above: f32::from(p.picks[2]) - 128.0,
+                    unless: {
+                        let level = Some(f32::from(p.picks[2]) - 128.0);
+                        let (above, below) = if p.picks[2].is_multiple_of(2) {
+                            (level, None)
+                        } else {
+                            (None, level)
+                        };
+                        Shut {
+                            feature: n(w),
+                            above,
+                            below,
+                        }
                     },
                     leak,
                 },

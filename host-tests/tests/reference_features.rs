@@ -35,7 +35,7 @@
 mod support;
 
 use detector_build::Config;
-use detector_core::{Crossing, LongerWarmUp, Signal, StageSpec, Window};
+use detector_core::{Crossing, LongerWarmUp, Shut, Signal, StageSpec, Window};
 use proptest::prelude::*;
 use support::*;
 
@@ -114,9 +114,19 @@ fn stage(kind: &str) -> StageSpec<String> {
         },
         "gate" => StageSpec::Gate {
             input: name("x"),
-            unless: Crossing {
+            unless: Shut {
                 feature: name("y"),
-                above: 0.0,
+                above: Some(0.0),
+                below: None,
+            },
+            leak: 0.0,
+        },
+        "gate_below" => StageSpec::Gate {
+            input: name("x"),
+            unless: Shut {
+                feature: name("y"),
+                above: None,
+                below: Some(0.0),
             },
             leak: 0.0,
         },
@@ -127,14 +137,15 @@ fn stage(kind: &str) -> StageSpec<String> {
 proptest! {
     #![proptest_config(proptest_config(CASES, "proptest-regressions/reference_features.txt"))]
 
-    /// Raw, abs, positive, difference, gate, and rate at an integer detector rate are exact,
+    /// Raw, abs, positive, difference, gates (shut above or below a level), and rate at an
+    /// integer detector rate are exact,
     /// saturating at the `Signal` range, including the extremes of the input range.
     #[test]
     fn exact_stages_are_exact(
         rate in 10u32..=50_000,
         s in prop_oneof![samples(4, 31, 80), Just(vec![[i32::MIN, i32::MAX, 0, -1], [i32::MAX, i32::MIN, 1, 0], [i32::MIN; 4]])],
     ) {
-        let kinds = ["raw", "abs", "positive", "difference", "rate", "gate"];
+        let kinds = ["raw", "abs", "positive", "difference", "rate", "gate", "gate_below"];
         let c = features_config(rate as f32, kinds.iter().map(|k| (*k, stage(k))).collect());
         for (t, (got, want)) in run(&c, &s).iter().enumerate() {
             for (i, kind) in kinds.iter().enumerate() {
@@ -517,15 +528,21 @@ fn envelope_by_hand() {
 
 /// A gate of x, shut while y is above `above`, leaking `leak`.
 fn gate_config(above: f32, leak: f32) -> Config {
+    gate_on_side(Some(above), None, leak)
+}
+
+/// A gate of x, shut while y is above `above` or below `below`, leaking `leak`.
+fn gate_on_side(above: Option<f32>, below: Option<f32>, leak: f32) -> Config {
     features_config(
         1000.0,
         vec![(
             "gate",
             StageSpec::Gate {
                 input: name("x"),
-                unless: Crossing {
+                unless: Shut {
                     feature: name("y"),
                     above,
+                    below,
                 },
                 leak,
             },
@@ -533,11 +550,12 @@ fn gate_config(above: f32, leak: f32) -> Config {
     )
 }
 
-/// The gate by hand: x passes while y is at or below 0.5, and reads 0 while y is above it
-/// (x 3, 4, 5, 6, 7 with y 0, 0.5, 0.75, -2, 1 give 3, 4, 0, 6, 0).
+/// The gate by hand, x 3, 4, 5, 6, 7 with y 0, 0.5, 0.75, -2, 1: shut above 0.5, x passes
+/// while y is at or below it and reads 0 above (3, 4, 0, 6, 0); shut below 0.5, x passes
+/// while y is at or above it and reads 0 below (0, 4, 5, 0, 7), or, leaking a half, half
+/// of x (1.5, 4, 5, 3, 7).
 #[test]
 fn gate_by_hand() {
-    let c = gate_config(0.5, 0.0);
     let s = [
         (3, 0),
         (4, 1 << 15),
@@ -546,8 +564,15 @@ fn gate_by_hand() {
         (7, 1 << 16),
     ]
     .map(|(x, y)| [x << 16, y, 0, 0]);
-    let got: Vec<f64> = run(&c, &s).into_iter().map(|(g, _)| g[0]).collect();
-    assert_eq!(got, [3.0, 4.0, 0.0, 6.0, 0.0]);
+    for (above, below, leak, want) in [
+        (Some(0.5), None, 0.0, [3.0, 4.0, 0.0, 6.0, 0.0]),
+        (None, Some(0.5), 0.0, [0.0, 4.0, 5.0, 0.0, 7.0]),
+        (None, Some(0.5), 0.5, [1.5, 4.0, 5.0, 3.0, 7.0]),
+    ] {
+        let c = gate_on_side(above, below, leak);
+        let got: Vec<f64> = run(&c, &s).into_iter().map(|(g, _)| g[0]).collect();
+        assert_eq!(got, want, "above {above:?}, below {below:?}, leak {leak}");
+    }
 }
 
 /// A leaking gate passes its fraction of the input while shut: with a leak of 0.1, x 3,
