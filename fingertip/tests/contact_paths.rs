@@ -12,9 +12,9 @@ use fingertip::score::{Outcome, classify};
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use fingertip::{APPROACH_TOML, replay};
-use rand::rngs::Xoshiro256PlusPlus;
-use rand::{RngExt, SeedableRng};
-use rand_distr::StandardNormal;
+
+mod support;
+use support::{force_noise, times, trace_of};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
 const FORCE_TERM: &str = "    { feature = \"force_push_clear\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
@@ -158,9 +158,8 @@ const UNBOUNDED: &str =
 /// into an object of that stiffness [N/m]. The force sensor's noise is 1.5 cN RMS; the film
 /// and the accelerometer read nothing, so that the force sensor alone can find a contact.
 fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace {
-    let rate = 5000.0;
-    let dt = 1.0 / rate;
-    let t: Vec<f64> = (0..1500).map(|k| f64::from(k) / rate).collect();
+    let dt = 1.0 / 5000.0;
+    let t = times(1500);
     let acc_des: Vec<f64> = t
         .iter()
         .map(|&s| {
@@ -178,9 +177,7 @@ fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace 
     let lag = 1.0 / (2.0 * std::f64::consts::PI * 15.0);
     let mut acc = 0.0;
     let mut pressed = 0.0;
-    // White noise of 1.5 cN RMS, the same on every call.
-    let mut rng = Xoshiro256PlusPlus::seed_from_u64(1);
-    let mut noise = move || 0.015 * rng.sample::<f64, _>(StandardNormal);
+    let mut noise = force_noise(1);
     let force_x: Vec<f64> = t
         .iter()
         .zip(&acc_des)
@@ -193,23 +190,15 @@ fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace 
             -mass_kg * acc - stiffness.map_or(0.0, |k| k * pressed) + noise()
         })
         .collect();
-    let zeros = vec![0.0; t.len()];
-    let mut channels: Vec<(String, Vec<f64>)> = [
-        "force_y",
-        "skin_accel",
-        "stress_rate",
-        "pos_err_x",
-        "pos_err_y",
-        "vel_des_y",
-        "acc_des_y",
-    ]
-    .iter()
-    .map(|c| (c.to_string(), zeros.clone()))
-    .collect();
-    channels.push(("force_x".into(), force_x));
-    channels.push(("vel_des_x".into(), vel_des));
-    channels.push(("acc_des_x".into(), acc_des));
-    Trace::from_columns("approach", t, channels).expect("a trace")
+    trace_of(
+        "approach",
+        t,
+        vec![
+            ("force_x", force_x),
+            ("vel_des_x", vel_des),
+            ("acc_des_x", acc_des),
+        ],
+    )
 }
 
 /// The events `detector` confirms on `trace`.
