@@ -212,8 +212,7 @@ pub enum StageSpec<N> {
     },
 }
 
-/// A feature rising above a level (see [`StageSpec::LowPass`]'s `warm_up_until` and
-/// [`StageSpec::Gate`]'s `unless`).
+/// A feature rising above a level (see [`StageSpec::LowPass`]'s `warm_up_until`).
 #[derive(Clone, Debug, PartialEq)]
 #[cfg_attr(feature = "serde", derive(serde::Serialize, serde::Deserialize))]
 #[cfg_attr(feature = "serde", serde(deny_unknown_fields))]

@@ -176,7 +176,7 @@ fn burst_at_any_speed() -> Detector {
 #[test]
 fn an_arm_shaking_itself_while_it_moves_slowly_along_the_approach_is_no_disturbance() {
     // Free motion on loops that take their velocity from the encoders through 250 Hz,
-    // cruising at 7.9 mm/s against the approach and 9.3 mm/s across it: the arm shakes
+    // cruising at 7.9 mm/s away from the object and 9.3 mm/s across: the arm shakes
     // itself, and the force's energy over 10 ms climbs above twice its usual level for
     // tens of ms, 3.7 s into the run.
     let opts = SimOptions {
@@ -199,7 +199,7 @@ fn an_arm_shaking_itself_while_it_moves_slowly_along_the_approach_is_no_disturba
     );
 }
 
-/// 500 ms of steady motion at `along` mm/s along the approach and 20 mm/s across it, the
+/// 500 ms of steady motion at `along_mm_s` along the approach and 20 mm/s across it, the
 /// force sensor's noise 1.5 cN RMS, and from 300 ms on a vibration of 4 cN at 80 Hz for
 /// 60 ms: its 8 cN^2 are twice the noise's energy and more than the 4 cN^2 above it that
 /// this path confirms from, and less than four times it plus the 2-10 cN^2 the jump judges
