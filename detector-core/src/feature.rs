@@ -245,6 +245,26 @@ pub struct Shut<N> {
     pub below: Option<f32>,
 }
 
+impl<N> Shut<N> {
+    /// Shut while `feature` is above `level`.
+    pub fn above(feature: N, level: f32) -> Shut<N> {
+        Shut {
+            feature,
+            above: Some(level),
+            below: None,
+        }
+    }
+
+    /// Shut while `feature` is below `level`.
+    pub fn below(feature: N, level: f32) -> Shut<N> {
+        Shut {
+            feature,
+            above: None,
+            below: Some(level),
+        }
+    }
+}
+
 /// A low-pass's longer warm-up (see [`StageSpec::LowPass`]'s `warm_up_longer`): taken when
 /// a feature is above a level as the shorter one ends.
 #[derive(Clone, Debug, PartialEq)]
@@ -2446,11 +2466,7 @@ mod tests {
         );
         let gate = |leak| StageSpec::Gate {
             input: 0,
-            unless: Shut {
-                feature: 1,
-                above: Some(0.0),
-                below: None,
-            },
+            unless: Shut::above(1, 0.0),
             leak,
         };
         for leak in [-0.1, 1.01, f32::NAN, f32::INFINITY, 1e-6] {

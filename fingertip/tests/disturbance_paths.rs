@@ -118,6 +118,19 @@ fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
     );
 }
 
+/// `duration_s` of randomized free motion from `seed`, the arm's joint loops taking their
+/// velocity from the encoders through a 250 Hz low-pass.
+fn free_motion_on_encoder_velocity(seed: u64, duration_s: f64) -> Trace {
+    let opts = SimOptions {
+        seed,
+        randomize: true,
+        duration_s: Some(duration_s),
+        velocity_filter_hz: 250.0,
+        ..SimOptions::default()
+    };
+    sim::simulate(&Scenario::FreeMotion, &opts).expect("simulates")
+}
+
 /// The default's jump while the commanded speed changes: a gate leaking a tenth.
 const JUMP_LEAK: &str = "unless = { feature = \"speed_unsettled\", above = 3.0 }, leak = 0.1 }";
 
@@ -136,14 +149,7 @@ fn an_arm_jolting_itself_after_a_change_of_speed_is_no_disturbance() {
     // Free motion on loops that take their velocity from the encoders through 250 Hz: 50
     // ms after a ramp of the commanded speed ends (at 48 mm/s along x), the fingertip
     // reads a jolt of 18 cN as the position error jumps by 6 um.
-    let opts = SimOptions {
-        seed: 3_626_650_549_393_848_380,
-        randomize: true,
-        duration_s: Some(4.4),
-        velocity_filter_hz: 250.0,
-        ..SimOptions::default()
-    };
-    let tr = sim::simulate(&Scenario::FreeMotion, &opts).expect("simulates");
+    let tr = free_motion_on_encoder_velocity(3_626_650_549_393_848_380, 4.4);
     assert_eq!(
         disturbances(&full_weight, &tr),
         1,
@@ -179,14 +185,7 @@ fn an_arm_shaking_itself_while_it_moves_slowly_along_the_approach_is_no_disturba
     // cruising at 7.9 mm/s away from the object and 9.3 mm/s across: the arm shakes
     // itself, and the force's energy over 10 ms climbs above twice its usual level for
     // tens of ms, 3.7 s into the run.
-    let opts = SimOptions {
-        seed: 3_626_650_549_393_848_582,
-        randomize: true,
-        duration_s: Some(3.9),
-        velocity_filter_hz: 250.0,
-        ..SimOptions::default()
-    };
-    let tr = sim::simulate(&Scenario::FreeMotion, &opts).expect("simulates");
+    let tr = free_motion_on_encoder_velocity(3_626_650_549_393_848_582, 3.9);
     assert_eq!(
         disturbances(&burst_at_any_speed(), &tr),
         1,

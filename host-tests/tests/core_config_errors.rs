@@ -298,20 +298,12 @@ fn an_unknown_channel() {
     };
     let gate = |feature: &str, above: f32| StageSpec::Gate {
         input: name("a"),
-        unless: Shut {
-            feature: name(feature),
-            above: Some(above),
-            below: None,
-        },
+        unless: Shut::above(name(feature), above),
         leak: 0.0,
     };
     let gate_below = |feature: &str, below: f32| StageSpec::Gate {
         input: name("a"),
-        unless: Shut {
-            feature: name(feature),
-            above: None,
-            below: Some(below),
-        },
+        unless: Shut::below(name(feature), below),
         leak: 0.0,
     };
     let watchers: [fn(&str, f32) -> StageSpec<String>; 4] = [until, longer, gate, gate_below];

@@ -533,9 +533,9 @@ proptest! {
                 9 => StageSpec::Mean { input: p(0), window: (*window).min(40) },
                 10 => StageSpec::Envelope { input: p(0), cutoff_hz: *cutoff },
                 11 => {
-                    let level = Some(*cutoff - 200.0);
-                    let (above, below) = if picks[1].is_multiple_of(2) { (level, None) } else { (None, level) };
-                    StageSpec::Gate { input: p(0), unless: Shut { feature: p(1), above, below }, leak: f32::from(picks[1] % 3) / 2.0 }
+                    let level = *cutoff - 200.0;
+                    let unless = if picks[1].is_multiple_of(2) { Shut::above(p(1), level) } else { Shut::below(p(1), level) };
+                    StageSpec::Gate { input: p(0), unless, leak: f32::from(picks[1] % 3) / 2.0 }
                 }
                 12 => StageSpec::Positive { input: p(0) },
                 _ => StageSpec::Ste { input: p(0), window: (*window).min(40), shape: if picks[1] % 2 == 0 { Window::Rectangular } else { Window::Triangular } },

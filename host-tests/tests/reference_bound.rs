@@ -343,16 +343,11 @@ fn stage_for(
                 StageSpec::Gate {
                     input: n(a),
                     unless: {
-                        let level = Some(f32::from(p.picks[2]) - 128.0);
-                        let (above, below) = if p.picks[2].is_multiple_of(2) {
-                            (level, None)
+                        let level = f32::from(p.picks[2]) - 128.0;
+                        if p.picks[2].is_multiple_of(2) {
+                            Shut::above(n(w), level)
                         } else {
-                            (None, level)
-                        };
-                        Shut {
-                            feature: n(w),
-                            above,
-                            below,
+                            Shut::below(n(w), level)
                         }
                     },
                     leak,

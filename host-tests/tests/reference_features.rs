@@ -114,20 +114,12 @@ fn stage(kind: &str) -> StageSpec<String> {
         },
         "gate" => StageSpec::Gate {
             input: name("x"),
-            unless: Shut {
-                feature: name("y"),
-                above: Some(0.0),
-                below: None,
-            },
+            unless: Shut::above(name("y"), 0.0),
             leak: 0.0,
         },
         "gate_below" => StageSpec::Gate {
             input: name("x"),
-            unless: Shut {
-                feature: name("y"),
-                above: None,
-                below: Some(0.0),
-            },
+            unless: Shut::below(name("y"), 0.0),
             leak: 0.0,
         },
         _ => raw("x"),
@@ -138,8 +130,8 @@ proptest! {
     #![proptest_config(proptest_config(CASES, "proptest-regressions/reference_features.txt"))]
 
     /// Raw, abs, positive, difference, gates (shut above or below a level), and rate at an
-    /// integer detector rate are exact,
-    /// saturating at the `Signal` range, including the extremes of the input range.
+    /// integer detector rate are exact, saturating at the `Signal` range, including the
+    /// extremes of the input range.
     #[test]
     fn exact_stages_are_exact(
         rate in 10u32..=50_000,
