@@ -3,11 +3,11 @@
 //! fingertip on its foam hardly feels it; the path judges the position error swinging off
 //! the path and back (`err_shake_steady`), not an arm falling steadily behind its command,
 //! which a stall or an object taking part of the speed does. On the force sensor: the
-//! vibration's jump weighs a tenth while the commanded speed changes (`shake_judged`) and
-//! while the finger moves slower than 12 mm/s along the approach (`shake_moving`), where an
-//! arm whose loops differentiate their encoders jolts itself; a vibration held for tens of
-//! ms is judged only while the finger moves along the approach at 12 mm/s or more
-//! (`burst_moving`), where those loops do not shake it in bursts.
+//! vibration's jump weighs a twentieth while the commanded speed changes (`shake_judged`)
+//! and a tenth while the finger moves slower than 12 mm/s along the approach
+//! (`shake_moving`), where an arm whose loops differentiate their encoders jolts itself; a
+//! vibration held for tens of ms is judged only while the finger moves along the approach
+//! at 12 mm/s or more (`burst_moving`), where those loops do not shake it in bursts.
 
 use detector_build::Config;
 use detector_core::Detector;
@@ -132,29 +132,30 @@ fn free_motion_on_encoder_velocity(seed: u64, duration_s: f64) -> Trace {
     sim::simulate(&Scenario::FreeMotion, &opts).expect("simulates")
 }
 
-/// The default's jump while the commanded speed changes: a gate leaking a tenth.
-const JUMP_LEAK: &str = "unless = { feature = \"speed_unsettled\", above = 3.0 }, leak = 0.1 }";
+/// The default's jump while the commanded speed changes: a gate leaking a twentieth.
+const JUMP_LEAK: &str = "unless = { feature = \"speed_unsettled\", above = 3.0 }, leak = 0.05 }";
 /// The default's jump while the finger moves slowly along the approach: a second gate
 /// leaking a tenth.
 const SLOW_LEAK: &str = "unless = { feature = \"approach_speed\", below = 12.0 }, leak = 0.1 }";
 
 /// The default with its leaking gate `gate`, as written in `configs/approach.toml`, passing
-/// the whole jump.
-fn at_full_weight(gate: &str) -> Detector {
+/// the fraction `leak` of the jump.
+fn with_leak(gate: &str, leak: &str) -> Detector {
     assert!(
         APPROACH_TOML.contains(gate),
         "the default's leaking gate {gate}"
     );
-    detector(&APPROACH_TOML.replacen(gate, &gate.replace("leak = 0.1", "leak = 1.0"), 1))
+    let (condition, _) = gate.split_once("leak = ").expect("a leaking gate");
+    detector(&APPROACH_TOML.replacen(gate, &format!("{condition}leak = {leak} }}"), 1))
 }
 
-/// The arm's jolt in `tr` is confirmed as a disturbance by `full_weight`, not by the
-/// default.
-fn assert_jolt_left_alone(full_weight: &Detector, tr: &Trace) {
+/// The arm's jolt in `tr` is confirmed as a disturbance by `heavier`, which weighs the jump
+/// more, not by the default.
+fn assert_jolt_left_alone(heavier: &Detector, tr: &Trace) {
     assert_eq!(
-        disturbances(full_weight, tr),
+        disturbances(heavier, tr),
         1,
-        "the jump at full weight no longer confirms the jolt: the run no longer shows it"
+        "the jump weighed more no longer confirms the jolt: the run no longer shows it"
     );
     assert_eq!(
         disturbances(&detector(APPROACH_TOML), tr),
@@ -169,7 +170,17 @@ fn an_arm_jolting_itself_after_a_change_of_speed_is_no_disturbance() {
     // ms after a ramp of the commanded speed ends (at 48 mm/s along x), the fingertip
     // reads a jolt of 18 cN as the position error jumps by 6 um.
     let tr = free_motion_on_encoder_velocity(3_626_650_549_393_848_380, 4.4);
-    assert_jolt_left_alone(&at_full_weight(JUMP_LEAK), &tr);
+    assert_jolt_left_alone(&with_leak(JUMP_LEAK, "1.0"), &tr);
+}
+
+#[test]
+fn a_strong_jolt_just_after_a_change_of_speed_is_no_disturbance() {
+    // Free motion on loops that take their velocity from the encoders through 250 Hz,
+    // cruising at 18 mm/s away from the object and 46 mm/s across just after a change of
+    // speed (remembered as 9 mm/s): the fingertip reads jumps of 80-90 cN^2, which a tenth
+    // weighs above the path's level and a twentieth below it, 3.44 s into the run.
+    let tr = free_motion_on_encoder_velocity(3_626_650_549_393_848_480, 3.5);
+    assert_jolt_left_alone(&with_leak(JUMP_LEAK, "0.1"), &tr);
 }
 
 #[test]
@@ -179,7 +190,7 @@ fn an_arm_jolting_itself_while_it_moves_slowly_along_the_approach_is_no_disturba
     // of speed: the force's energy jumps to about 40 cN^2, five times its usual level,
     // 12.36 s into the run.
     let tr = free_motion_on_encoder_velocity(3_626_650_549_393_848_350, 12.4);
-    assert_jolt_left_alone(&at_full_weight(SLOW_LEAK), &tr);
+    assert_jolt_left_alone(&with_leak(SLOW_LEAK, "1.0"), &tr);
 }
 
 /// The default's vibration term: the burst path judged while the finger moves along the
