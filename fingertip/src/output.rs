@@ -284,12 +284,12 @@ fn unregister(path: &Path) {
 mod tests {
     use super::*;
 
-    fn scratch(name: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("fingertip-output-{name}-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&dir);
-        fs::create_dir_all(&dir).expect("scratch");
-        dir
+    /// A fresh directory, removed with everything in it when the guard is dropped.
+    fn scratch(name: &str) -> tempfile::TempDir {
+        tempfile::Builder::new()
+            .prefix(&format!("fingertip-output-{name}-"))
+            .tempdir()
+            .expect("scratch")
     }
 
     fn refused(inputs: &[&Path], outputs: &[(&Path, Kind)], words: &[&str]) {
@@ -306,7 +306,8 @@ mod tests {
     /// link to it, for inputs and between outputs.
     #[test]
     fn an_output_that_is_an_input_or_another_output_is_refused() {
-        let dir = scratch("same");
+        let tmp = scratch("same");
+        let dir = tmp.path();
         let input = dir.join("run.csv");
         fs::write(&input, "data").expect("write");
         let hard = dir.join("hard.csv");
@@ -333,7 +334,7 @@ mod tests {
         );
         assert_eq!(fs::read_to_string(&input).expect("read"), "data");
         assert!(!out.exists());
-        let staged: Vec<_> = fs::read_dir(&dir)
+        let staged: Vec<_> = fs::read_dir(dir)
             .expect("dir")
             .filter_map(Result::ok)
             .filter(|e| e.file_name().to_string_lossy().contains(".tmp-"))
@@ -343,13 +344,14 @@ mod tests {
 
     #[test]
     fn bad_places_and_names_are_refused_before_any_work() {
-        let dir = scratch("bad");
+        let tmp = scratch("bad");
+        let dir = tmp.path();
         refused(
             &[],
             &[(&dir.join("none").join("x.csv"), Kind::File)],
             &["does not exist"],
         );
-        refused(&[], &[(&dir, Kind::File)], &["is a directory"]);
+        refused(&[], &[(dir, Kind::File)], &["is a directory"]);
         refused(
             &[],
             &[(&dir.join("b.jpg"), Kind::Figure)],
@@ -364,14 +366,15 @@ mod tests {
     /// a special file is written through, not replaced.
     #[test]
     fn outputs_appear_together_at_the_commit() {
-        let dir = scratch("commit");
+        let tmp = scratch("commit");
+        let dir = tmp.path();
         let a = dir.join("a.csv");
         let b = dir.join("b.json");
         let plan = OutputPlan::new(&[], &[(&a, Kind::File), (&b, Kind::File)]).expect("plan");
         plan.write(0, b"a").expect("write");
         assert!(!a.exists(), "nothing before the commit");
         drop(plan);
-        let leftovers: Vec<_> = fs::read_dir(&dir).expect("dir").collect();
+        let leftovers: Vec<_> = fs::read_dir(dir).expect("dir").collect();
         assert!(leftovers.is_empty(), "{leftovers:?}");
 
         let plan = OutputPlan::new(&[], &[(&a, Kind::File), (&b, Kind::File)]).expect("plan");

@@ -12,14 +12,13 @@ fn fingertip(args: &[&str]) -> Output {
         .expect("the fingertip binary runs")
 }
 
-/// A fresh directory of its own for each call (tests run in parallel).
-fn scratch(name: &str) -> PathBuf {
-    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-    let dir = std::env::temp_dir().join(format!("fingertip-cli-{}-{name}-{n}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir
+/// A fresh directory of its own for each call (tests run in parallel), removed with
+/// everything in it when the returned guard is dropped.
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("fingertip-cli-{name}-"))
+        .tempdir()
+        .expect("scratch dir")
 }
 
 fn text(bytes: &[u8]) -> String {
@@ -63,7 +62,8 @@ fn rerun_first_failure(stdout: &str, dir: &Path) -> (String, String) {
 /// accelerations nothing), within the paper's 20 ms.
 #[test]
 fn nominal_table1_runs_detect_the_right_event() {
-    let dir = scratch("table1");
+    let tmp = scratch("table1");
+    let dir = tmp.path();
     let list = text(&fingertip(&["scenarios"]).stdout);
     let runs: Vec<(String, String)> = list
         .lines()
@@ -82,7 +82,7 @@ fn nominal_table1_runs_detect_the_right_event() {
         table1
     );
     for (scenario, expected) in runs {
-        let trace = simulate(&dir, &scenario);
+        let trace = simulate(dir, &scenario);
         let out = fingertip(&["replay", trace.to_str().expect("utf-8"), "--json"]);
         assert!(out.status.success(), "{scenario}: {}", text(&out.stderr));
         let report: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON");
@@ -113,7 +113,8 @@ fn nominal_table1_runs_detect_the_right_event() {
 
 #[test]
 fn evaluate_writes_the_documented_report() {
-    let dir = scratch("evaluate");
+    let tmp = scratch("evaluate");
+    let dir = tmp.path();
     let json = dir.join("report.json");
     let figure = dir.join("bins.png");
     let out = fingertip(&[
@@ -179,7 +180,8 @@ fn evaluate_writes_the_documented_report() {
 /// fifth configuration is refused before any run.
 #[test]
 fn evaluate_compares_configurations_on_the_same_runs() {
-    let dir = scratch("compare");
+    let tmp = scratch("compare");
+    let dir = tmp.path();
     let json = dir.join("compare.json");
     let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
     let approach = format!("{root}approach.toml");
@@ -232,7 +234,8 @@ fn evaluate_compares_configurations_on_the_same_runs() {
 /// channel the trace does not have is named.
 #[test]
 fn identify_finds_the_fingertip_inertia_in_free_motion() {
-    let dir = scratch("identify");
+    let tmp = scratch("identify");
+    let dir = tmp.path();
     let trace = dir.join("free.csv");
     let out = fingertip(&[
         "simulate",
@@ -285,8 +288,9 @@ fn identify_finds_the_fingertip_inertia_in_free_motion() {
 /// work, with nothing written: each case of the class, for every command with outputs.
 #[test]
 fn outputs_never_destroy_inputs_and_are_all_or_none() {
-    let dir = scratch("outputs");
-    let trace = simulate(&dir, "contact_hard_8");
+    let tmp = scratch("outputs");
+    let dir = tmp.path();
+    let trace = simulate(dir, "contact_hard_8");
     let original = std::fs::read(&trace).expect("trace");
     let t = trace.to_str().expect("utf-8");
     let d = |name: &str| dir.join(name).to_str().expect("utf-8").to_owned();
@@ -396,7 +400,7 @@ fn outputs_never_destroy_inputs_and_are_all_or_none() {
         "the input is intact"
     );
     assert_eq!(std::fs::read(&config).expect("config"), config_before);
-    let mut left: Vec<String> = std::fs::read_dir(&dir)
+    let mut left: Vec<String> = std::fs::read_dir(dir)
         .expect("dir")
         .filter_map(Result::ok)
         .map(|e| e.file_name().to_string_lossy().into_owned())
@@ -430,7 +434,8 @@ fn outputs_never_destroy_inputs_and_are_all_or_none() {
 #[test]
 fn ctrl_c_leaves_no_output_and_no_staging_file() {
     use std::io::Write;
-    let dir = scratch("ctrl-c");
+    let tmp = scratch("ctrl-c");
+    let dir = tmp.path();
     let path = |name: &str| dir.join(name).to_str().expect("utf-8").to_owned();
     let mut child = Command::new(env!("CARGO_BIN_EXE_fingertip"))
         .args(["replay", "/dev/stdin", "--out", &path("conf.csv")])
@@ -446,7 +451,7 @@ fn ctrl_c_leaves_no_output_and_no_staging_file() {
     stdin.write_all(&recording).expect("the replay reads");
     stdin.flush().expect("the replay reads");
     let entries = || -> Vec<String> {
-        let mut names: Vec<String> = std::fs::read_dir(&dir)
+        let mut names: Vec<String> = std::fs::read_dir(dir)
             .expect("scratch dir")
             .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
             .collect();
@@ -479,8 +484,9 @@ fn ctrl_c_leaves_no_output_and_no_staging_file() {
 
 #[test]
 fn replay_candump_decodes_to_the_same_events() {
-    let dir = scratch("candump");
-    let trace = simulate(&dir, "contact_hard_8");
+    let tmp = scratch("candump");
+    let dir = tmp.path();
+    let trace = simulate(dir, "contact_hard_8");
     let log = dir.join("run.log");
     let out = fingertip(&[
         "replay",
@@ -510,7 +516,8 @@ fn replay_candump_decodes_to_the_same_events() {
 
 /// One line naming the file, row and column; non-zero exit; no output file left behind.
 fn rejects(trace_text: &str, config: Option<&str>, expect: &[&str]) {
-    let dir = scratch("bad");
+    let tmp = scratch("bad");
+    let dir = tmp.path();
     let trace = dir.join("bad.csv");
     std::fs::write(&trace, trace_text).expect("write");
     let out_csv = dir.join("out.csv");
@@ -596,7 +603,8 @@ fn bad_configurations_are_rejected_clearly() {
 /// one warning line each on standard error naming the file and the item.
 #[test]
 fn configuration_warnings_are_printed_and_the_run_goes_on() {
-    let dir = scratch("warn");
+    let tmp = scratch("warn");
+    let dir = tmp.path();
     let trace = dir.join("quiet.csv");
     std::fs::write(
         &trace,
@@ -675,7 +683,8 @@ fn evaluate_bounds_its_counts() {
 /// trace `simulate` writes then recording it. Recordings have their own timing.
 #[test]
 fn evaluate_gives_runs_a_lead_in() {
-    let dir = scratch("lead_in");
+    let tmp = scratch("lead_in");
+    let dir = tmp.path();
     let json = dir.join("report.json");
     let out = fingertip(&[
         "evaluate",
@@ -697,7 +706,7 @@ fn evaluate_gives_runs_a_lead_in() {
         serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
     assert_eq!(report["lead_in_ms"], 200.0);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
-    let (line, csv) = rerun_first_failure(&stdout, &dir);
+    let (line, csv) = rerun_first_failure(&stdout, dir);
     let words: Vec<&str> = line.split_whitespace().collect();
     assert_eq!(words[1], "--seed", "{line}");
     assert_eq!(words[3..5], ["--lead-in-ms", "200:"], "{line}");
@@ -717,7 +726,8 @@ fn evaluate_gives_runs_a_lead_in() {
 /// free-motion run's length), the trace `simulate` writes then recording them.
 #[test]
 fn evaluate_runs_beyond_the_envelope() {
-    let dir = scratch("beyond");
+    let tmp = scratch("beyond");
+    let dir = tmp.path();
     let json = dir.join("report.json");
     let out = fingertip(&[
         "evaluate",
@@ -757,7 +767,7 @@ fn evaluate_runs_beyond_the_envelope() {
     assert_eq!(report["ranges"][0]["parameter"], "plant.control_bandwidth");
     assert_eq!(report["ranges"][1]["min"], 0.6);
     // The paper's detector gets some of these wrong; its first failure's line is run again.
-    let (line, csv) = rerun_first_failure(&stdout, &dir);
+    let (line, csv) = rerun_first_failure(&stdout, dir);
     assert!(
         line.contains(" --noise-factor 3 --encoder-um 5 --film-highpass-hz 1.5 --context-turned-deg=-10 --range plant.control_bandwidth=10..12 --range plant.arm_mass=0.6..0.7:"),
         "{line}"
@@ -799,11 +809,12 @@ fn evaluate_runs_beyond_the_envelope() {
 /// the JSON has the simulated evaluation's fields.
 #[test]
 fn evaluate_scores_labelled_recordings() {
-    let dir = scratch("corpus");
+    let tmp = scratch("corpus");
+    let dir = tmp.path();
     let sub = dir.join("day1");
     std::fs::create_dir_all(&sub).expect("sub dir");
     simulate(&sub, "link_collision_8");
-    let contact = simulate(&dir, "contact_hard_8");
+    let contact = simulate(dir, "contact_hard_8");
     // The real contact labelled for its first 10 ms only, then an invented one in the
     // last 10 ms, where nothing new happens.
     let text_in = std::fs::read_to_string(&contact).expect("trace");
@@ -932,8 +943,9 @@ fn evaluate_scores_labelled_recordings() {
 /// windows are refused before any work.
 #[test]
 fn features_show_what_separates_each_event() {
-    let dir = scratch("features");
-    simulate(&dir, "contact_hard_8");
+    let tmp = scratch("features");
+    let dir = tmp.path();
+    simulate(dir, "contact_hard_8");
     let free = dir.join("free.csv");
     let out = fingertip(&[
         "simulate",
@@ -997,7 +1009,8 @@ fn features_show_what_separates_each_event() {
 /// nothing is written.
 #[test]
 fn fit_writes_a_configuration_that_runs() {
-    let dir = scratch("fit");
+    let tmp = scratch("fit");
+    let dir = tmp.path();
     let corpus = dir.join("corpus");
     std::fs::create_dir_all(&corpus).expect("corpus dir");
     for scenario in ["contact_hard_8", "disturbance_large_5"] {
@@ -1167,7 +1180,8 @@ fn bumps_with_unlabelled(seed: u64, height: f64, unlabelled: bool) -> String {
 /// unlabelled one, one whose channels or rate do not match are refused, the file named.
 #[test]
 fn fit_finds_what_is_separable_and_refuses_what_is_not() {
-    let dir = scratch("fit-bumps");
+    let tmp = scratch("fit-bumps");
+    let dir = tmp.path();
     let config = dir.join("bump.toml");
     std::fs::write(&config, BUMP_TOML).expect("written");
     let cfg = config.to_str().expect("utf-8");
@@ -1319,7 +1333,8 @@ fn fit_finds_what_is_separable_and_refuses_what_is_not() {
 /// touching the bus; a missing interface is named too.
 #[test]
 fn load_and_info_name_what_is_wrong() {
-    let dir = scratch("load");
+    let tmp = scratch("load");
+    let dir = tmp.path();
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "rate_hz = -1.0\n").expect("write");
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
@@ -1410,8 +1425,9 @@ fn a_flight_recording_replays_from_its_saved_state() {
     use fingertip::can_tools::recording::{RecordedRow, Recording};
     use fingertip_can::service::{RecordingCause, RecordingInfo};
 
-    let dir = scratch("recording");
-    let run = fingertip::trace::Trace::read(simulate(&dir, "contact_hard_8")).expect("reads");
+    let tmp = scratch("recording");
+    let dir = tmp.path();
+    let run = fingertip::trace::Trace::read(simulate(dir, "contact_hard_8")).expect("reads");
     let config = detector_build::Config::from_toml(fingertip::APPROACH_TOML).expect("parses");
     let d = detector_build::build(&config).expect("builds");
     let crc =
@@ -1537,7 +1553,8 @@ fn a_flight_recording_replays_from_its_saved_state() {
 /// trace, and refuses a time outside 0 to 1,000 ms naming the option, writing nothing.
 #[test]
 fn simulate_writes_a_collisions_twin() {
-    let dir = scratch("twin");
+    let tmp = scratch("twin");
+    let dir = tmp.path();
     let trace = dir.join("twin.csv");
     let path = trace.to_str().expect("utf-8");
     let ok = fingertip(&[

@@ -16,12 +16,13 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
 }
 
-/// A fresh directory of its own for each call (tests run in parallel).
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fingertip-ur3-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir
+/// A fresh directory of its own for each call (tests run in parallel), removed with
+/// everything in it when the returned guard is dropped.
+fn scratch(name: &str) -> tempfile::TempDir {
+    tempfile::Builder::new()
+        .prefix(&format!("fingertip-ur3-{name}-"))
+        .tempdir()
+        .expect("scratch dir")
 }
 
 fn python_available() -> bool {
@@ -175,7 +176,8 @@ fn the_converted_log_reads_as_traces_and_evaluates() {
     if !python_available() {
         return;
     }
-    let dir = scratch("convert");
+    let tmp = scratch("convert");
+    let dir = tmp.path();
     let input = dir.join("dataset.csv");
     std::fs::write(&input, dataset(&log())).expect("write the log");
     let out = dir.join("traces");
@@ -285,12 +287,13 @@ fn bad_input_is_refused_naming_it_and_nothing_is_written() {
     if !python_available() {
         return;
     }
-    let dir = scratch("bad");
+    let tmp = scratch("bad");
+    let dir = tmp.path();
     let good = dataset(&log());
     let out = dir.join("out");
 
     let no_flag = good.replacen(";grip_lost", ";grip", 1);
-    refused(&dir, "no_flag.csv", &no_flag, &out, "no column `grip_lost`");
+    refused(dir, "no_flag.csv", &no_flag, &out, "no column `grip_lost`");
     assert!(!out.exists(), "nothing written");
 
     // A number that is not one, named by its line and column.
@@ -307,7 +310,7 @@ fn bad_input_is_refused_naming_it_and_nothing_is_written() {
         .collect();
     let expected = "line 6, column `Tool_current`: `0.0x8` is not a number";
     refused(
-        &dir,
+        dir,
         "bad_number.csv",
         &bad_number.join("\n"),
         &out,
@@ -318,13 +321,13 @@ fn bad_input_is_refused_naming_it_and_nothing_is_written() {
     let mut backwards: Vec<&str> = good.lines().collect();
     backwards.swap(3, 4);
     let expected = "line 5, column `Timestamp`: time does not increase";
-    refused(&dir, "backwards.csv", &backwards.join("\n"), &out, expected);
+    refused(dir, "backwards.csv", &backwards.join("\n"), &out, expected);
     assert!(!out.exists(), "nothing written");
 
     // An output directory holding something already is left as it is.
     std::fs::create_dir_all(&out).expect("mkdir");
     std::fs::write(out.join("keep.csv"), "t,x\n0,1\n").expect("write");
-    refused(&dir, "good.csv", &good, &out, "not an empty directory");
+    refused(dir, "good.csv", &good, &out, "not an empty directory");
     let left: Vec<_> = std::fs::read_dir(&out).expect("dir").collect();
     assert_eq!(left.len(), 1, "only what was there");
 }
