@@ -449,6 +449,14 @@ fn snap(v: f64) -> f32 {
     Signal::from_f64(v.clamp(-32000.0, 32000.0)).to_f32()
 }
 
+/// `low + span`, snapped as [`snap`] does, and strictly above `low`: from 256 in magnitude
+/// up, an `f32` step is coarser than a 16.16 one, and a narrow span would snap back onto
+/// `low`. Widening it only makes the curve gentler.
+fn snap_above(low: f32, span: f64) -> f32 {
+    let f32_step = f64::from(low.abs()) * f64::from(f32::EPSILON);
+    snap(f64::from(low) + span.max(2.0 * f32_step))
+}
+
 /// A CDF for a feature with statistics `st` and error bound `delta`, placed by the term's
 /// fractions, every shoulder at least `RAMP_PER_ERROR · delta` wide.
 fn cdf_for(t: &TermPlan, st: &Stats, delta: f64) -> CdfSpec {
@@ -471,7 +479,7 @@ fn cdf_for(t: &TermPlan, st: &Stats, delta: f64) -> CdfSpec {
             let low = snap(low);
             CdfSpec::Sigmoid {
                 low,
-                high: snap(f64::from(low) + s),
+                high: snap_above(low, s),
                 falling: t.shape == 1,
             }
         }
@@ -493,9 +501,9 @@ fn cdf_for(t: &TermPlan, st: &Stats, delta: f64) -> CdfSpec {
                 return binary(false);
             }
             let low = snap(low);
-            let plateau_low = snap(f64::from(low) + s1);
+            let plateau_low = snap_above(low, s1);
             let plateau_high = snap(f64::from(plateau_low) + plateau);
-            let high = snap(f64::from(plateau_high) + s2);
+            let high = snap_above(plateau_high, s2);
             CdfSpec::FlatBell {
                 low,
                 plateau_low,
