@@ -21,7 +21,7 @@ mod support;
 use support::{force_noise, times, trace_of};
 
 /// The default's encoder term, as written in `configs/approach.toml`.
-const ENCODER_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, cdf = { sigmoid = { low = 0.1, high = 0.6 } } },\n";
+const ENCODER_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, cdf = { sigmoid = { low = 0.08, high = 0.45 } } },\n";
 /// The swing's input: the error's growth above 30 Hz.
 const WOBBLE_INPUT: &str = "stage = { abs = { input = \"err_wobble\" } }";
 /// The same swing taken from the error's growth itself, a steady growth included.
