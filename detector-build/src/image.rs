@@ -3,7 +3,7 @@
 //! the layout [`detector_core::image`] describes and reads.
 
 use detector_core::image::{MAGIC, Section};
-use detector_core::{Detector, Sink};
+use detector_core::{Detector, MAX_CHANNELS, Sink};
 
 use crate::compile::{Compiled, Event};
 use crate::config::{ConfigError, Item, Problem};
@@ -46,7 +46,11 @@ impl Compiled {
                         stage.write_image(&mut w);
                     }
                 }
-                Section::SlotChannels => self.slot_channels.iter().for_each(|&m| w.u32(m)),
+                Section::SlotChannels => self
+                    .slot_channels
+                    .iter()
+                    .take(MAX_CHANNELS + self.features.len())
+                    .for_each(|&m| w.u32(m)),
                 Section::Taps => self.taps.iter().for_each(|&t| w.u32(t)),
                 Section::Terms => {
                     w.count(self.psis.len());

@@ -186,10 +186,15 @@ impl Detector {
                 Section::Rate => self.read_rate(r)?,
                 Section::Channels => self.read_channels(r)?,
                 Section::Features => self.read_features(r)?,
-                Section::SlotChannels => self.slot_channels.iter_mut().try_for_each(|m| {
-                    *m = r.u32()?;
-                    Ok::<_, ImageError>(())
-                })?,
+                // The slots in use only: the channels', then the features read above.
+                Section::SlotChannels => self
+                    .slot_channels
+                    .iter_mut()
+                    .take(MAX_CHANNELS + self.stages.len())
+                    .try_for_each(|m| {
+                        *m = r.u32()?;
+                        Ok::<_, ImageError>(())
+                    })?,
                 Section::Taps => self.read_taps(r)?,
                 Section::Terms => self.read_terms(r)?,
                 Section::Events => self.read_events(r)?,

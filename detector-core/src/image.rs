@@ -5,7 +5,7 @@
 //!
 //! # Layout
 //!
-//! Little-endian. The magic [`MAGIC`] (`FTD8`, the digit is the layout's version), then
+//! Little-endian. The magic [`MAGIC`] (`FTD9`, the digit is the layout's version), then
 //! each [`Section`] in [`Section::ORDER`], each opened by its tag byte:
 //!
 //! | section | tag | contents |
@@ -13,7 +13,7 @@
 //! | [`Section::Rate`] | 1 | the detector rate in Hz (`f32`) |
 //! | [`Section::Channels`] | 2 | a count, then per channel: name, scale (`f32`) |
 //! | [`Section::Features`] | 3 | a count, then per feature: name, stage (its kind's tag, then its values) |
-//! | [`Section::SlotChannels`] | 4 | per slot (channels, then features): the channels it depends on (`u32` mask) |
+//! | [`Section::SlotChannels`] | 4 | per slot in use ([`crate::MAX_CHANNELS`] channels' slots, then one per feature): the channels it depends on (`u32` mask) |
 //! | [`Section::Taps`] | 5 | the STE window taps (`u32`, Q24), [`crate::feature::WINDOW_POOL`] of them |
 //! | [`Section::Terms`] | 6 | a count, then per distinct (feature, CDF) pair: the slot, the CDF (its shape's tag, then its values) |
 //! | [`Section::Events`] | 7 | a count, then per event: name, context terms (count, pair indices), sensor terms (count, pair index and Q15 weight each), alert and confirm levels (on, off, dwell, hold: `u16`), onset level (`u16`) |
@@ -27,7 +27,7 @@
 use crate::Name;
 
 /// The first four bytes of every image (the digit is the layout's version).
-pub const MAGIC: [u8; 4] = *b"FTD8";
+pub const MAGIC: [u8; 4] = *b"FTD9";
 
 /// An image's sections, each opened by its tag byte (the discriminant), in
 /// [`Section::ORDER`]: the one statement of the layout that the writer and the loader both

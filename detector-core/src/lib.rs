@@ -33,7 +33,7 @@ pub type Name = heapless::String<NAME_LEN>;
 /// Most input channels a configuration may declare.
 pub const MAX_CHANNELS: usize = 16;
 /// Most features a configuration may declare.
-pub const MAX_FEATURES: usize = 64;
+pub const MAX_FEATURES: usize = 128;
 /// Most events a configuration may declare.
 pub const MAX_EVENTS: usize = 8;
 /// Most phases a configuration may declare.

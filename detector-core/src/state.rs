@@ -400,9 +400,9 @@ impl State {
     }
 }
 
-/// The first bytes of a saved state: its format, version 4 (64 features; filter states
+/// The first bytes of a saved state: its format, version 5 (128 features; filter states
 /// holding their output times 2³², primed by their sample count).
-pub const SAVED_MAGIC: [u8; 4] = *b"FTS4";
+pub const SAVED_MAGIC: [u8; 4] = *b"FTS5";
 
 /// Bytes of an event's saved state: rising, onset, and each level's up and run.
 const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2);
@@ -467,9 +467,11 @@ impl core::fmt::Display for StateError {
                 "a saved detector state is {} bytes, not {n}",
                 State::SAVED_BYTES
             ),
-            StateError::Magic => {
-                f.write_str("not a saved detector state (it does not start with `FTS4`)")
-            }
+            StateError::Magic => write!(
+                f,
+                "not a saved detector state (it does not start with `{}`)",
+                core::str::from_utf8(&SAVED_MAGIC).unwrap_or("?")
+            ),
             StateError::Flag => f.write_str("a flag of the saved state is neither 0 nor 1"),
             StateError::Phase(p, n) => {
                 write!(

@@ -83,7 +83,7 @@ impl Segment {
 }
 
 /// The ring, the run and its trigger. Every field starts at zero, so that the board's
-/// recorder (45 KiB) is zero-initialised memory, not an image in flash.
+/// recorder (51 KiB) is zero-initialised memory, not an image in flash.
 pub struct Recorder {
     segments: [Segment; SEGMENTS],
     /// The segment being filled.
