@@ -1,13 +1,15 @@
 //! The default detector's disturbance paths, each for the evidence it was added for. On the
 //! encoders: a blow on link 1 moves the joints, which the encoders read, while the
 //! fingertip on its foam hardly feels it; the path judges the position error swinging off
-//! the path and back (`err_shake_steady`), not an arm falling steadily behind its command,
-//! which a stall or an object taking part of the speed does. On the force sensor: the
-//! vibration's jump weighs a twentieth while the commanded speed changes (`shake_judged`)
-//! and a tenth while the finger moves slower than 12 mm/s along the approach
-//! (`shake_moving`), where an arm whose loops differentiate their encoders jolts itself; a
-//! vibration held for tens of ms is judged only while the finger moves along the approach
-//! at 12 mm/s or more (`burst_moving`), where those loops do not shake it in bursts.
+//! the path and back (`err_shake_steady`, on the swings back), not an arm falling steadily
+//! behind its command, which a stall or an object taking part of the speed does, nor one
+//! being stopped over tens of ms, whose error's growth steepens without turning back. On
+//! the force sensor: the vibration's jump weighs a twentieth while the commanded speed
+//! changes (`shake_judged`) and a tenth while the finger moves slower than 12 mm/s along
+//! the approach (`shake_moving`), where an arm whose loops differentiate their encoders
+//! jolts itself; a vibration held for tens of ms is judged only while the finger moves
+//! along the approach at 12 mm/s or more (`burst_moving`), where those loops do not shake
+//! it in bursts.
 
 use detector_build::Config;
 use detector_core::Detector;
@@ -26,6 +28,12 @@ const ENCODER_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, 
 const WOBBLE_INPUT: &str = "stage = { abs = { input = \"err_wobble\" } }";
 /// The same swing taken from the error's growth itself, a steady growth included.
 const GROWTH_INPUT: &str = "stage = { abs = { input = \"err_growth\" } }";
+/// The averaged swing, on the swings back onto the path only.
+const BACK_INPUT: &str =
+    "stage = { low_pass = { input = \"err_back\", cutoff_hz = 12.0, warm_up_ms = 0.2 } }";
+/// The same average on the swing's size, either way.
+const SIZE_INPUT: &str =
+    "stage = { low_pass = { input = \"err_swing\", cutoff_hz = 12.0, warm_up_ms = 0.2 } }";
 
 fn detector(toml: &str) -> Detector {
     detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
@@ -116,6 +124,33 @@ fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
     assert!(
         disturbances(&growth, &stalled) > 0,
         "the error's growth itself, a steady one included, reads no disturbance either: the test no longer shows the high-pass's part"
+    );
+}
+
+#[test]
+fn an_arm_being_stopped_over_tens_of_ms_is_no_disturbance() {
+    assert!(
+        APPROACH_TOML.contains(BACK_INPUT),
+        "the default's swings back"
+    );
+    let default = detector(APPROACH_TOML);
+    let either_way = detector(&APPROACH_TOML.replacen(BACK_INPUT, SIZE_INPUT, 1));
+    // From 150 ms on, an obstacle that gives before it holds takes a growing part of the
+    // commanded 20 mm/s away, up to 4 mm/s after 30 ms, and keeps it: the error's growth
+    // steepens for 30 ms and never turns back.
+    let stopping = steady_motion(|t| {
+        let (ramp, dt) = (0.03, (t - 0.15).max(0.0));
+        let lost_um_s = 4000.0;
+        10.0 + if dt < ramp {
+            lost_um_s * dt * dt / (2.0 * ramp)
+        } else {
+            lost_um_s * (ramp / 2.0 + dt - ramp)
+        }
+    });
+    assert_eq!(disturbances(&default, &stopping), 0, "an arm being stopped");
+    assert!(
+        disturbances(&either_way, &stopping) > 0,
+        "the swing's size either way reads no disturbance either: the test no longer shows the swings back's part"
     );
 }
 
