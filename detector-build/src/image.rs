@@ -3,7 +3,7 @@
 //! the layout [`detector_core::image`] describes and reads.
 
 use detector_core::image::{MAGIC, Section};
-use detector_core::{Detector, MAX_CHANNELS, Sink};
+use detector_core::{Detector, Sink};
 
 use crate::compile::{Compiled, Event};
 use crate::config::{ConfigError, Item, Problem};
@@ -49,7 +49,7 @@ impl Compiled {
                 Section::SlotChannels => self
                     .slot_channels
                     .iter()
-                    .take(MAX_CHANNELS + self.features.len())
+                    .take(Section::slots_in_use(self.features.len()))
                     .for_each(|&m| w.u32(m)),
                 Section::Taps => self.taps.iter().for_each(|&t| w.u32(t)),
                 Section::Terms => {

@@ -186,11 +186,10 @@ impl Detector {
                 Section::Rate => self.read_rate(r)?,
                 Section::Channels => self.read_channels(r)?,
                 Section::Features => self.read_features(r)?,
-                // The slots in use only: the channels', then the features read above.
                 Section::SlotChannels => self
                     .slot_channels
                     .iter_mut()
-                    .take(MAX_CHANNELS + self.stages.len())
+                    .take(Section::slots_in_use(self.stages.len()))
                     .try_for_each(|m| {
                         *m = r.u32()?;
                         Ok::<_, ImageError>(())

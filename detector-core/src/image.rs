@@ -13,7 +13,7 @@
 //! | [`Section::Rate`] | 1 | the detector rate in Hz (`f32`) |
 //! | [`Section::Channels`] | 2 | a count, then per channel: name, scale (`f32`) |
 //! | [`Section::Features`] | 3 | a count, then per feature: name, stage (its kind's tag, then its values) |
-//! | [`Section::SlotChannels`] | 4 | per slot in use ([`crate::MAX_CHANNELS`] channels' slots, then one per feature): the channels it depends on (`u32` mask) |
+//! | [`Section::SlotChannels`] | 4 | per slot in use ([`Section::slots_in_use`]: the channels' slots, then one per feature): the channels it depends on (`u32` mask) |
 //! | [`Section::Taps`] | 5 | the STE window taps (`u32`, Q24), [`crate::feature::WINDOW_POOL`] of them |
 //! | [`Section::Terms`] | 6 | a count, then per distinct (feature, CDF) pair: the slot, the CDF (its shape's tag, then its values) |
 //! | [`Section::Events`] | 7 | a count, then per event: name, context terms (count, pair indices), sensor terms (count, pair index and Q15 weight each), alert and confirm levels (on, off, dwell, hold: `u16`), onset level (`u16`) |
@@ -64,6 +64,13 @@ impl Section {
         Section::Events,
         Section::Phases,
     ];
+
+    /// How many slots [`Section::SlotChannels`] holds for a detector of `features`
+    /// features: the channels' slots, then one per feature (the slots in use, so that an
+    /// image does not grow with the capacity).
+    pub const fn slots_in_use(features: usize) -> usize {
+        crate::MAX_CHANNELS + features
+    }
 
     /// The section's name, for errors.
     pub const fn name(self) -> &'static str {
