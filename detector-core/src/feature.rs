@@ -1724,25 +1724,28 @@ fn low_pass(st: &mut StageState, x: i32, alpha: u32, warm: u16) -> i32 {
     } else {
         st.pos += 1;
         let d = i64::from(x.saturating_sub(filter_output(st)));
-        // The n-th sample's gain is ⌊2³¹ / n⌋ (one 32-bit division, in hardware on the
-        // chip): ½ for the second, whose doubled step is a shift; from the third on, twice
-        // the gain is below 2³¹, which the mask tells the compiler, for one signed
-        // multiply-accumulate.
-        st.acc += if st.pos == 2 {
-            d << 31
-        } else {
-            let twice = ((1u32 << 31) / u32::from(st.pos)) << 1;
-            d * i64::from((twice & 0x7fff_ffff) as i32)
-        };
+        // Twice the gain, as `filter_step` takes it, is below 2³¹ from the second sample
+        // on (½ itself would not be), which the mask tells the compiler: one signed
+        // multiply-accumulate on the chip for every n, with no case of its own for ½.
+        let twice = mean_gain(u32::from(st.pos)) << 1;
+        st.acc += d * i64::from((twice & 0x7fff_ffff) as i32);
     }
     filter_output(st)
 }
 
-/// The last sample n whose plain-mean gain ⌊2³¹ / n⌋ is above α, where a low-pass's warm-up
-/// ends unless its own limit ends it sooner: ⌊2³¹ / n⌋ > α ⇔ n ≤ 2³¹ / (α + 1). At most
-/// [`WARM_LIMIT`].
+/// The gain of a low-pass's n-th warm-up sample in Q31: 1/n rounded down from just below 1
+/// (one 32-bit division, in hardware on the chip). Exact 1/n but for powers of two, where
+/// it is 2⁻³¹ short, so that ½ stays below 2³⁰ and fits a signed step.
+#[inline(always)]
+const fn mean_gain(n: u32) -> u32 {
+    i32::MAX as u32 / n
+}
+
+/// The last sample n whose plain-mean gain [`mean_gain`]`(n)` is above α, where a
+/// low-pass's warm-up ends unless its own limit ends it sooner: ⌊(2³¹ − 1) / n⌋ > α ⇔
+/// n ≤ (2³¹ − 1) / (α + 1). At most [`WARM_LIMIT`].
 const fn mean_gain_samples(alpha: u32) -> u16 {
-    let n = (1u32 << 31) / alpha.saturating_add(1);
+    let n = mean_gain(alpha.saturating_add(1));
     if n > WARM_LIMIT as u32 {
         WARM_LIMIT
     } else {
@@ -1761,7 +1764,7 @@ const fn mean_gain_samples(alpha: u32) -> u16 {
 /// property test holds it there). The difference saturates only for an input more than
 /// 2³¹ steps away; it keeps its sign, so y still moves towards x. The sum's exact value
 /// lies between x · 2³² and the old acc, so it fits. Every gain is below 2³¹ (α is checked
-/// so, 1/n is at most ½); the mask says so.
+/// so); the mask says so.
 #[inline(always)]
 fn filter_step(st: &mut StageState, x: i32, gain: u32) {
     let diff = x.saturating_sub(filter_output(st));
@@ -1987,10 +1990,10 @@ mod tests {
     }
 
     /// The warm-up's end, worked out once from α, is the last sample whose plain-mean gain
-    /// ⌊2³¹/n⌋ is still above α, for coefficients from the smallest to the largest.
+    /// [`mean_gain`] is still above α, for coefficients from the smallest to the largest.
     #[test]
     fn the_warm_up_ends_where_the_mean_gain_falls_to_alpha() {
-        let gain = |n: u32| (1u32 << 31) / n;
+        let gain = |n: u32| (f64::from(i32::MAX) / f64::from(n)).floor() as u32;
         for alpha in [
             1u32,
             32_767,
