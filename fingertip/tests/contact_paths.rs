@@ -6,58 +6,17 @@
 //! film is held only to the jerk its braking can read, which pulls the skin off the film,
 //! and its force sensor's push counts beyond what the fingertip's own inertia can leave.
 
-use detector_build::Config;
 use detector_core::Detector;
-use fingertip::score::{Outcome, classify};
-use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::APPROACH_TOML;
+use fingertip::score::Outcome;
+use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
-use fingertip::{APPROACH_TOML, replay};
 
 mod support;
-use support::{force_noise, times, trace_of};
+use support::{confirmed, detector, force_noise, outcomes, right, runs, times, trace_of};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
 const FORCE_TERM: &str = "    { feature = \"force_push_clear\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
-
-fn detector(toml: &str) -> Detector {
-    detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
-}
-
-/// The randomized runs of scenario `s` on seeds `seeds`, with the film AC-coupled at
-/// `film_highpass_hz`.
-fn runs(s: Scenario, seeds: std::ops::Range<u64>, film_highpass_hz: f64) -> Vec<Trace> {
-    seeds
-        .map(|seed| {
-            let opts = SimOptions {
-                seed,
-                randomize: true,
-                film_highpass_hz,
-                ..SimOptions::default()
-            };
-            sim::simulate(&s, &opts).expect("simulates")
-        })
-        .collect()
-}
-
-/// What `detector` makes of each of `traces` (runs of `s`).
-fn outcomes(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<Outcome> {
-    traces
-        .iter()
-        .map(|tr| {
-            let (on, _) = tr.truth_onset().expect("an event");
-            let decisions = replay::replay(detector, tr, |_, _, _| {}).expect("replays");
-            classify(s.expected().map(|e| (e, tr.time()[on])), &decisions)
-        })
-        .collect()
-}
-
-/// Whether `detector` gets each of `traces` (runs of `s`) right.
-fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
-    outcomes(detector, s, traces)
-        .iter()
-        .map(Outcome::is_right)
-        .collect()
-}
 
 /// The seeds of the runs in `right` that were not right.
 fn wrong(seeds: std::ops::Range<u64>, right: &[bool]) -> Vec<u64> {
@@ -78,7 +37,11 @@ fn an_ac_coupled_film_leaves_very_soft_contacts_to_the_force_sensor() {
     let default = detector(APPROACH_TOML);
     let s = Scenario::ContactVerySoft1;
     let seeds = 1..41;
-    let coupled = runs(s, seeds.clone(), 2.0);
+    let coupled_film = SimOptions {
+        film_highpass_hz: 2.0,
+        ..SimOptions::default()
+    };
+    let coupled = runs(s, seeds.clone(), &coupled_film);
     let with_force = right(&default, s, &coupled);
     let film_alone = right(&film_only, s, &coupled);
     assert!(
@@ -93,7 +56,11 @@ fn an_ac_coupled_film_leaves_very_soft_contacts_to_the_force_sensor() {
         film_alone.len()
     );
     // On a film without coupling (the envelope's), the default finds them too.
-    assert!(right(&default, s, &runs(s, seeds, 0.0)).iter().all(|&r| r));
+    assert!(
+        right(&default, s, &runs(s, seeds, &SimOptions::default()))
+            .iter()
+            .all(|&r| r)
+    );
 }
 
 /// The bound the default holds the film's slow path to, as written in
@@ -115,7 +82,7 @@ fn a_braking_finger_finds_soft_objects_on_its_film() {
     let s = Scenario::ContactBraking;
     // Half the runs touch a hard object; of the soft ones, the softest third.
     let seeds = 1..241;
-    let soft: Vec<Trace> = runs(s, seeds, 0.0)
+    let soft: Vec<Trace> = runs(s, seeds, &SimOptions::default())
         .into_iter()
         .filter(|tr| {
             tr.meta("object") == Some("soft")
@@ -199,16 +166,6 @@ fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace 
             ("acc_des_x", acc_des),
         ],
     )
-}
-
-/// The events `detector` confirms on `trace`.
-fn confirmed(detector: &Detector, trace: &Trace) -> Vec<String> {
-    replay::replay(detector, trace, |_, _, _| {})
-        .expect("replays")
-        .iter()
-        .filter(|d| d.is_confirm())
-        .map(|d| d.event.to_string())
-        .collect()
 }
 
 #[test]

@@ -11,16 +11,13 @@
 //! along the approach at 12 mm/s or more (`burst_moving`), where those loops do not shake
 //! it in bursts.
 
-use detector_build::Config;
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::replay::replay;
-use fingertip::score::classify;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
-use support::{force_noise, times, trace_of};
+use support::{confirmed, detector, force_noise, right, runs, steady_motion, times, trace_of};
 
 /// The default's encoder term, as written in `configs/approach.toml`.
 const ENCODER_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, cdf = { sigmoid = { low = 0.08, high = 0.45 } } },\n";
@@ -35,27 +32,6 @@ const BACK_INPUT: &str =
 const SIZE_INPUT: &str =
     "stage = { low_pass = { input = \"err_swing\", cutoff_hz = 12.0, warm_up_ms = 0.2 } }";
 
-fn detector(toml: &str) -> Detector {
-    detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
-}
-
-/// How many of the randomized runs of `s` on `seeds` `detector` gets right.
-fn right(detector: &Detector, s: Scenario, seeds: std::ops::Range<u64>) -> usize {
-    seeds
-        .filter(|&seed| {
-            let opts = SimOptions {
-                seed,
-                randomize: true,
-                ..SimOptions::default()
-            };
-            let tr = sim::simulate(&s, &opts).expect("simulates");
-            let (on, _) = tr.truth_onset().expect("an event");
-            let decisions = replay(detector, &tr, |_, _, _| {}).expect("replays");
-            classify(s.expected().map(|e| (e, tr.time()[on])), &decisions).is_right()
-        })
-        .count()
-}
-
 #[test]
 fn the_encoders_find_knocks_on_link_1_that_the_fingertip_hardly_feels() {
     assert!(
@@ -65,9 +41,9 @@ fn the_encoders_find_knocks_on_link_1_that_the_fingertip_hardly_feels() {
     let fingertip_only = detector(&APPROACH_TOML.replacen(ENCODER_TERM, "", 1));
     let default = detector(APPROACH_TOML);
     let s = Scenario::KnockLink1;
-    let seeds = 1..1001;
-    let with_encoders = right(&default, s, seeds.clone());
-    let without = right(&fingertip_only, s, seeds);
+    let knocks = runs(s, 1..1001, &SimOptions::default());
+    let count = |d: &Detector| right(d, s, &knocks).iter().filter(|&&r| r).count();
+    let (with_encoders, without) = (count(&default), count(&fingertip_only));
     // 914 and 901 of the 1,000 when this was written.
     assert!(
         with_encoders >= without + 10,
@@ -75,25 +51,11 @@ fn the_encoders_find_knocks_on_link_1_that_the_fingertip_hardly_feels() {
     );
 }
 
-/// 300 ms at a steady commanded 20 mm/s along the approach, the position error along it
-/// `err_um(t)` (t in s from the start): nothing on the fingertip's sensors.
-fn steady_motion(err_um: impl Fn(f64) -> f64) -> Trace {
-    let t = times(1500);
-    let err = t.iter().map(|&s| err_um(s) * 1e-6).collect();
-    let speed = vec![0.020; t.len()];
-    trace_of(
-        "steady motion",
-        t,
-        vec![("pos_err_x", err), ("vel_des_x", speed)],
-    )
-}
-
 /// How many disturbances `detector` confirms on `trace`.
 fn disturbances(detector: &Detector, trace: &Trace) -> usize {
-    replay(detector, trace, |_, _, _| {})
-        .expect("replays")
+    confirmed(detector, trace)
         .iter()
-        .filter(|d| d.is_confirm() && d.event == "disturbance")
+        .filter(|e| *e == "disturbance")
         .count()
 }
 

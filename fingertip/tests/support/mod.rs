@@ -1,7 +1,13 @@
-//! What the detector-path tests share to build synthetic traces: the simulator's channels
-//! from the few a test drives, and the force sensor's noise.
+//! What the detector-path tests share: detectors from TOML, randomized runs and what a
+//! detector makes of them, and synthetic traces (the simulator's channels from the few a
+//! test drives, and the force sensor's noise). Each test crate that includes it uses a part.
+#![allow(dead_code)]
 
-use fingertip::sim::CHANNELS;
+use detector_build::Config;
+use detector_core::Detector;
+use fingertip::replay::replay;
+use fingertip::score::{Outcome, classify};
+use fingertip::sim::{self, CHANNELS, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use rand::rngs::Xoshiro256PlusPlus;
 use rand::{RngExt, SeedableRng};
@@ -29,4 +35,67 @@ pub fn trace_of(name: &str, t: Vec<f64>, given: Vec<(&str, Vec<f64>)>) -> Trace 
 pub fn force_noise(seed: u64) -> impl FnMut() -> f64 {
     let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
     move || 0.015 * rng.sample::<f64, _>(StandardNormal)
+}
+
+/// The detector a configuration's TOML builds.
+pub fn detector(toml: &str) -> Detector {
+    detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
+}
+
+/// The randomized runs of scenario `s` on seeds `seeds`, the other options as in `base`.
+pub fn runs(s: Scenario, seeds: impl IntoIterator<Item = u64>, base: &SimOptions) -> Vec<Trace> {
+    seeds
+        .into_iter()
+        .map(|seed| {
+            let opts = SimOptions {
+                seed,
+                randomize: true,
+                ..base.clone()
+            };
+            sim::simulate(&s, &opts).expect("simulates")
+        })
+        .collect()
+}
+
+/// What `detector` makes of each of `traces` (runs of `s`).
+pub fn outcomes(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<Outcome> {
+    traces
+        .iter()
+        .map(|tr| {
+            let (on, _) = tr.truth_onset().expect("an event");
+            let decisions = replay(detector, tr, |_, _, _| {}).expect("replays");
+            classify(s.expected().map(|e| (e, tr.time()[on])), &decisions)
+        })
+        .collect()
+}
+
+/// The events `detector` confirms on `trace`, in order.
+pub fn confirmed(detector: &Detector, trace: &Trace) -> Vec<String> {
+    replay(detector, trace, |_, _, _| {})
+        .expect("replays")
+        .iter()
+        .filter(|d| d.is_confirm())
+        .map(|d| d.event.to_string())
+        .collect()
+}
+
+/// Whether `detector` gets each of `traces` (runs of `s`) right.
+pub fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
+    outcomes(detector, s, traces)
+        .iter()
+        .map(Outcome::is_right)
+        .collect()
+}
+
+/// 300 ms at a steady commanded 20 mm/s along the approach, the position error along it
+/// `err_um(t)` (t in s from the start): nothing on the fingertip's sensors.
+pub fn steady_motion(err_um: impl Fn(f64) -> f64) -> Trace {
+    let t = times(1500);
+    let err = t.iter().map(|&s| err_um(s) * 1e-6).collect();
+    let speed = vec![0.020; t.len()];
+    trace_of(
+        "steady motion",
+        t,
+        vec![("pos_err_x", err), ("vel_des_x", speed)],
+    )
 }
