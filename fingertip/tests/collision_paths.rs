@@ -41,8 +41,8 @@ fn an_arm_losing_a_few_percent_of_its_speed_for_good_is_a_link_collision() {
     );
     let default = detector(APPROACH_TOML);
     let without = detector(&APPROACH_TOML.replacen(CREEP_TERM, "", 1));
-    // 3 mm/s of 20 (15 %): 2 % of the speed within the 1.3 ms `lag` looks over, under its
-    // 10 % allowance and the drive's ripple.
+    // 3 mm/s of 20 (15 %): over the 1.3 ms `lag` looks over, 3.9 µm, 1.3 µm beyond its
+    // 10 % allowance and under the 2 µm where its term begins.
     let blocked = losing(3000.0);
     assert_eq!(
         confirmed(&default, &blocked),

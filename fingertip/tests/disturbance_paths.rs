@@ -13,7 +13,7 @@
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::sim::{self, Scenario, SimOptions};
+use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
@@ -120,13 +120,11 @@ fn an_arm_being_stopped_over_tens_of_ms_is_no_disturbance() {
 /// velocity from the encoders through a 250 Hz low-pass.
 fn free_motion_on_encoder_velocity(seed: u64, duration_s: f64) -> Trace {
     let opts = SimOptions {
-        seed,
-        randomize: true,
         duration_s: Some(duration_s),
         velocity_filter_hz: 250.0,
         ..SimOptions::default()
     };
-    sim::simulate(&Scenario::FreeMotion, &opts).expect("simulates")
+    runs(Scenario::FreeMotion, [seed], &opts).remove(0)
 }
 
 /// The default's jump while the commanded speed changes: a gate leaking a twentieth.
