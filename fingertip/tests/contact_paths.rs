@@ -1,10 +1,12 @@
 //! The default detector's contact paths, each for the evidence it was added for. A very
 //! soft object at 1 cm/s on a film whose amplifier is AC-coupled: the film reads the
 //! steady loading as a rate that dies away, and the contact is found on the force sensor
-//! (the paper's "filtered force", `force_push_clear`). Without that path the film's
+//! (the paper's "filtered force", `force_push_free`). Without that path the film's
 //! paths alone miss some of the same runs. And a finger braking onto a soft object: its
 //! film is held only to the jerk its braking can read, which pulls the skin off the film,
 //! and its force sensor's push counts beyond what the fingertip's own inertia can leave.
+//! Nor is the push judged while the arm is held back: a struck link stops the fingertip,
+//! whose inertia presses it onto its force sensor.
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
@@ -16,7 +18,13 @@ mod support;
 use support::{confirmed, detector, force_noise, outcomes, right, runs, times, trace_of};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
-const FORCE_TERM: &str = "    { feature = \"force_push_clear\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
+const FORCE_TERM: &str = "    { feature = \"force_push_free\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
+/// The default's gate of that term on the arm held back.
+const HELD_GATE: &str =
+    "input = \"force_push_clear\", unless = { feature = \"lag\", above = 1.99 }";
+/// The same gate at a level no lag reaches.
+const NO_HELD_GATE: &str =
+    "input = \"force_push_clear\", unless = { feature = \"lag\", above = 30000.0 }";
 
 /// The seeds of the runs in `right` that were not right.
 fn wrong(seeds: std::ops::Range<u64>, right: &[bool]) -> Vec<u64> {
@@ -199,5 +207,45 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
         confirmed(&unbounded, &speeding),
         ["contact"],
         "the unbounded push reads no contact in the finger speeding up: the test no longer shows the bound's part"
+    );
+}
+
+/// Link collisions at 8 cm/s of the tuning seeds (base seed 100, run seeds as `fingertip
+/// evaluate` names them) on an arm whose loops take their velocity from the encoders
+/// through a 250 Hz low-pass: each stopped its fingertip hard enough that, without the
+/// gate, the force sensor's push confirmed a contact 4-11 ms after the strike.
+const STOPPED_HARD: [u64; 4] = [
+    14_820_092_336_525_572_267,
+    14_820_092_336_525_572_612,
+    14_820_092_336_525_572_922,
+    14_820_092_336_525_572_944,
+];
+
+#[test]
+fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
+    assert!(
+        APPROACH_TOML.contains(HELD_GATE),
+        "the default's gate on the arm held back"
+    );
+    let default = detector(APPROACH_TOML);
+    let ungated = detector(&APPROACH_TOML.replacen(HELD_GATE, NO_HELD_GATE, 1));
+    let s = Scenario::LinkCollision8;
+    let opts = SimOptions {
+        velocity_filter_hz: 250.0,
+        ..SimOptions::default()
+    };
+    let collisions = runs(s, STOPPED_HARD, &opts);
+    assert!(
+        right(&default, s, &collisions).iter().all(|&r| r),
+        "a link collision stopping the fingertip is not confirmed as one alone"
+    );
+    let read_as_contacts = collisions
+        .iter()
+        .filter(|tr| confirmed(&ungated, tr).iter().any(|e| e == "contact"))
+        .count();
+    assert!(
+        read_as_contacts >= 3,
+        "without the gate, only {read_as_contacts} of the {} collisions confirm a contact: the test no longer shows the gate's part",
+        STOPPED_HARD.len()
     );
 }
