@@ -15,7 +15,9 @@ use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
-use support::{confirmed, detector, force_noise, outcomes, right, runs, times, trace_of};
+use support::{
+    confirmed, default_with, detector, force_noise, outcomes, right, runs, times, trace_of,
+};
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
 const FORCE_TERM: &str = "    { feature = \"force_push_free\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
@@ -37,11 +39,7 @@ fn wrong(seeds: std::ops::Range<u64>, right: &[bool]) -> Vec<u64> {
 
 #[test]
 fn an_ac_coupled_film_leaves_very_soft_contacts_to_the_force_sensor() {
-    assert!(
-        APPROACH_TOML.contains(FORCE_TERM),
-        "the default's force term"
-    );
-    let film_only = detector(&APPROACH_TOML.replacen(FORCE_TERM, "", 1));
+    let film_only = default_with(FORCE_TERM, "");
     let default = detector(APPROACH_TOML);
     let s = Scenario::ContactVerySoft1;
     let seeds = 1..41;
@@ -81,11 +79,7 @@ const ANY_BOUND: &str =
 
 #[test]
 fn a_braking_finger_finds_soft_objects_on_its_film() {
-    assert!(
-        APPROACH_TOML.contains(PAD_BOUND),
-        "the default's film bound"
-    );
-    let any_direction = detector(&APPROACH_TOML.replacen(PAD_BOUND, ANY_BOUND, 1));
+    let any_direction = default_with(PAD_BOUND, ANY_BOUND);
     let default = detector(APPROACH_TOML);
     let s = Scenario::ContactBraking;
     // Half the runs touch a hard object; of the soft ones, the softest third.
@@ -178,7 +172,6 @@ fn approach(v0: f64, accel: f64, mass_kg: f64, stiffness: Option<f64>) -> Trace 
 
 #[test]
 fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
-    assert!(APPROACH_TOML.contains(INERTIA_BOUND), "the default's bound");
     let default = detector(APPROACH_TOML);
     // A 75 g fingertip, the envelope's heaviest, braking onto a soft object.
     let contact = approach(0.05, -0.4, 0.075, Some(150.0));
@@ -187,7 +180,7 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
         ["contact"],
         "a braking contact"
     );
-    let steady_only = detector(&APPROACH_TOML.replacen(INERTIA_BOUND, STEADY_ONLY, 1));
+    let steady_only = default_with(INERTIA_BOUND, STEADY_ONLY);
     assert!(
         confirmed(&steady_only, &contact).is_empty(),
         "the push judged only while the speed holds finds the braking contact too: the test no longer shows the bound's part"
@@ -202,7 +195,7 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
         confirmed(&default, &speeding).is_empty(),
         "a finger speeding up"
     );
-    let unbounded = detector(&APPROACH_TOML.replacen(INERTIA_BOUND, UNBOUNDED, 1));
+    let unbounded = default_with(INERTIA_BOUND, UNBOUNDED);
     assert_eq!(
         confirmed(&unbounded, &speeding),
         ["contact"],
@@ -223,12 +216,8 @@ const STOPPED_HARD: [u64; 4] = [
 
 #[test]
 fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
-    assert!(
-        APPROACH_TOML.contains(HELD_GATE),
-        "the default's gate on the arm held back"
-    );
     let default = detector(APPROACH_TOML);
-    let ungated = detector(&APPROACH_TOML.replacen(HELD_GATE, NO_HELD_GATE, 1));
+    let ungated = default_with(HELD_GATE, NO_HELD_GATE);
     let s = Scenario::LinkCollision8;
     let opts = SimOptions {
         velocity_filter_hz: 250.0,

@@ -17,7 +17,9 @@ use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
-use support::{confirmed, detector, force_noise, right, runs, steady_motion, times, trace_of};
+use support::{
+    confirmed, default_with, detector, force_noise, right, runs, steady_motion, times, trace_of,
+};
 
 /// The default's encoder term, as written in `configs/approach.toml`.
 const ENCODER_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, cdf = { sigmoid = { low = 0.08, high = 0.45 } } },\n";
@@ -34,11 +36,7 @@ const SIZE_INPUT: &str =
 
 #[test]
 fn the_encoders_find_knocks_on_link_1_that_the_fingertip_hardly_feels() {
-    assert!(
-        APPROACH_TOML.contains(ENCODER_TERM),
-        "the default's encoder term"
-    );
-    let fingertip_only = detector(&APPROACH_TOML.replacen(ENCODER_TERM, "", 1));
+    let fingertip_only = default_with(ENCODER_TERM, "");
     let default = detector(APPROACH_TOML);
     let s = Scenario::KnockLink1;
     let knocks = runs(s, 1..1001, &SimOptions::default());
@@ -61,9 +59,8 @@ fn disturbances(detector: &Detector, trace: &Trace) -> usize {
 
 #[test]
 fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
-    assert!(APPROACH_TOML.contains(WOBBLE_INPUT), "the default's swing");
     let default = detector(APPROACH_TOML);
-    let growth = detector(&APPROACH_TOML.replacen(WOBBLE_INPUT, GROWTH_INPUT, 1));
+    let growth = default_with(WOBBLE_INPUT, GROWTH_INPUT);
     // From 150 ms on, the arm swings ±5 µm at 60 Hz about its 10 µm tracking error.
     let shaken = steady_motion(|t| {
         10.0 + if t < 0.15 {
@@ -73,7 +70,7 @@ fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
         }
     });
     assert_eq!(disturbances(&default, &shaken), 1, "a shaken arm");
-    let fingertip_only = detector(&APPROACH_TOML.replacen(ENCODER_TERM, "", 1));
+    let fingertip_only = default_with(ENCODER_TERM, "");
     assert_eq!(
         disturbances(&fingertip_only, &shaken),
         0,
@@ -91,12 +88,8 @@ fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
 
 #[test]
 fn an_arm_being_stopped_over_tens_of_ms_is_no_disturbance() {
-    assert!(
-        APPROACH_TOML.contains(BACK_INPUT),
-        "the default's swings back"
-    );
     let default = detector(APPROACH_TOML);
-    let either_way = detector(&APPROACH_TOML.replacen(BACK_INPUT, SIZE_INPUT, 1));
+    let either_way = default_with(BACK_INPUT, SIZE_INPUT);
     // From 150 ms on, an obstacle that gives before it holds takes a growing part of the
     // commanded 20 mm/s away, up to 4 mm/s after 30 ms, and keeps it: the error's growth
     // steepens for 30 ms and never turns back.
@@ -136,12 +129,8 @@ const SLOW_LEAK: &str = "unless = { feature = \"approach_speed\", below = 12.0 }
 /// The default with its leaking gate `gate`, as written in `configs/approach.toml`, passing
 /// the fraction `leak` of the jump.
 fn with_leak(gate: &str, leak: &str) -> Detector {
-    assert!(
-        APPROACH_TOML.contains(gate),
-        "the default's leaking gate {gate}"
-    );
     let (condition, _) = gate.split_once("leak = ").expect("a leaking gate");
-    detector(&APPROACH_TOML.replacen(gate, &format!("{condition}leak = {leak} }}"), 1))
+    default_with(gate, &format!("{condition}leak = {leak} }}"))
 }
 
 /// The arm's jolt in `tr` is confirmed as a disturbance by `heavier`, which weighs the jump
@@ -194,15 +183,10 @@ const BURST_TERM: &str = "{ feature = \"burst_moving\", weight = 1.0";
 
 /// The default with the burst path judged at any speed along the approach.
 fn burst_at_any_speed() -> Detector {
-    assert!(
-        APPROACH_TOML.contains(BURST_TERM),
-        "the default's burst term"
-    );
-    detector(&APPROACH_TOML.replacen(
+    default_with(
         BURST_TERM,
         &BURST_TERM.replace("burst_moving", "burst_steady"),
-        1,
-    ))
+    )
 }
 
 #[test]

@@ -5,6 +5,7 @@
 
 use detector_build::Config;
 use detector_core::Detector;
+use fingertip::APPROACH_TOML;
 use fingertip::replay::replay;
 use fingertip::score::{Outcome, classify};
 use fingertip::sim::{self, CHANNELS, Scenario, SimOptions};
@@ -40,6 +41,16 @@ pub fn force_noise(seed: u64) -> impl FnMut() -> f64 {
 /// The detector a configuration's TOML builds.
 pub fn detector(toml: &str) -> Detector {
     detector_build::build(&Config::from_toml(toml).expect("parses")).expect("builds")
+}
+
+/// The default detector with `written`, which `configs/approach.toml` must hold as written,
+/// replaced by `instead`: the default without one of its parts, or with it changed.
+pub fn default_with(written: &str, instead: &str) -> Detector {
+    assert!(
+        APPROACH_TOML.contains(written),
+        "the default configuration no longer holds `{written}`: the test no longer tests it"
+    );
+    detector(&APPROACH_TOML.replacen(written, instead, 1))
 }
 
 /// The randomized runs of scenario `s` on seeds `seeds`, the other options as in `base`.
