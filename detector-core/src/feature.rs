@@ -1820,16 +1820,23 @@ const SQRT_SEEDS: [u16; 48] = [
     61028, 61575, 62118, 62656, 63189, 63718, 64242, 64762, 65278,
 ];
 
-/// ⌊√n⌋ for a 32-bit `n`: `n` shifted left by an even count into [2³⁰, 2³²), a seed from
-/// [`SQRT_SEEDS`], two Newton steps with 32-bit division (in hardware on the Cortex-M4),
-/// which leave the root or one above it, and a final correction; then shifted back.
+/// ⌊√n⌋ for a 32-bit `n`: `n` shifted left by an even count into [2³⁰, 2³²), its root
+/// there ([`normal_root`]), shifted back.
 #[inline]
 fn isqrt32(n: u32) -> u32 {
     if n == 0 {
         return 0;
     }
     let shift = n.leading_zeros() & !1;
-    let m = n << shift;
+    // ⌊⌊√m⌋ / 2^k⌋ = ⌊√m / 2^k⌋ = ⌊√n⌋ for m = n · 2^(2k), k = shift / 2.
+    normal_root(n << shift) >> (shift / 2)
+}
+
+/// ⌊√m⌋ for `m` in [2³⁰, 2³²): a seed from [`SQRT_SEEDS`], two Newton steps with 32-bit
+/// division (in hardware on the Cortex-M4), which leave the root or one above it, and a
+/// final correction.
+#[inline]
+fn normal_root(m: u32) -> u32 {
     // m ≥ 2^30, so the index is 16..=63 and `min` only spares a bounds check.
     let mut x = u32::from(SQRT_SEEDS[((m >> 26) as usize).wrapping_sub(16).min(47)]);
     // x ≥ 2^15 throughout, so the divisions never meet zero.
@@ -1838,20 +1845,23 @@ fn isqrt32(n: u32) -> u32 {
     if u64::from(x) * u64::from(x) > u64::from(m) {
         x -= 1;
     }
-    // ⌊⌊√m⌋ / 2^k⌋ = ⌊√m / 2^k⌋ = ⌊√n⌋ for k = shift / 2.
-    x >> (shift / 2)
+    x
 }
 
-/// √n for a 64-bit `n`, within a relative 2⁻¹⁵ of ⌊√n⌋ (exact below 2³²): the top 32 bits
-/// (shifted by an even count) go through [`isqrt32`].
+/// √n for a 64-bit `n`, within a relative 2⁻¹⁵ of ⌊√n⌋ (exact below 2³²): from 2³² on, its
+/// top 32 bits after a shift left by an even count, whose root [`normal_root`] takes once
+/// (the 32 bits are in [2³⁰, 2³²) already), shifted back.
 #[inline]
 pub(crate) fn isqrt64(n: u64) -> u32 {
-    let bits = 64 - n.leading_zeros();
-    if bits <= 32 {
-        return isqrt32(n as u32);
+    let (high, low) = ((n >> 32) as u32, n as u32);
+    if high == 0 {
+        return isqrt32(low);
     }
-    let shift = (bits - 32).next_multiple_of(2);
-    isqrt32((n >> shift) as u32) << (shift / 2)
+    let shift = high.leading_zeros() & !1; // even, at most 30
+    // Bits 32 - shift .. 64 - shift of n; `low` goes in two steps, as a shift by 32 would.
+    let m = (high << shift) | ((low >> 1) >> (31 - shift));
+    // √n ≈ √m · 2^(16 - shift / 2).
+    normal_root(m) << (16 - shift / 2)
 }
 
 #[cfg(test)]
