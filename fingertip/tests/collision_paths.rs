@@ -30,7 +30,7 @@ const NO_SPEED_GATE: &str =
 /// From 150 ms on, the arm at a commanded 20 mm/s falls behind its 10 µm tracking error at
 /// `lost_um_s` and keeps falling behind.
 fn losing(lost_um_s: f64) -> Trace {
-    steady_motion(|t| 10.0 + lost_um_s * (t - 0.15).max(0.0))
+    steady_motion(0.020, |t| 10.0 + lost_um_s * (t - 0.15).max(0.0))
 }
 
 #[test]

@@ -9,7 +9,8 @@
 //! the approach (`shake_moving`), where an arm whose loops differentiate their encoders
 //! jolts itself; a vibration held for tens of ms is judged only while the finger moves
 //! along the approach at 12 mm/s or more (`burst_moving`), where those loops do not shake
-//! it in bursts.
+//! it in bursts. Every path is judged while the arm is not held back (`lag`), whichever
+//! way the finger moves along the approach.
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
@@ -57,18 +58,29 @@ fn disturbances(detector: &Detector, trace: &Trace) -> usize {
         .count()
 }
 
+/// The default's lag: how far the error's growth exceeds a tenth of the commanded travel,
+/// the finger's speed along the approach either way.
+const LAG: &str =
+    "stage = { difference = { a = \"err_growth\", b = \"speed_along\", gain = 0.13263 } }";
+/// The same lag on the signed commanded velocity, whose tenth turns into a bonus while the
+/// finger moves away from the pad.
+const SIGNED_LAG: &str =
+    "stage = { difference = { a = \"err_growth\", b = \"vel_des_x\", gain = 0.13263 } }";
+
+/// From 150 ms on, the arm swings ±5 µm at 60 Hz about its 10 µm tracking error [µm].
+fn shaken_error_um(t: f64) -> f64 {
+    10.0 + if t < 0.15 {
+        0.0
+    } else {
+        5.0 * (2.0 * std::f64::consts::PI * 60.0 * (t - 0.15)).sin()
+    }
+}
+
 #[test]
 fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
     let default = detector(APPROACH_TOML);
     let growth = default_with(WOBBLE_INPUT, GROWTH_INPUT);
-    // From 150 ms on, the arm swings ±5 µm at 60 Hz about its 10 µm tracking error.
-    let shaken = steady_motion(|t| {
-        10.0 + if t < 0.15 {
-            0.0
-        } else {
-            5.0 * (2.0 * std::f64::consts::PI * 60.0 * (t - 0.15)).sin()
-        }
-    });
+    let shaken = steady_motion(0.020, shaken_error_um);
     assert_eq!(disturbances(&default, &shaken), 1, "a shaken arm");
     let fingertip_only = default_with(ENCODER_TERM, "");
     assert_eq!(
@@ -78,7 +90,7 @@ fn an_arm_shaken_off_its_path_is_a_disturbance_and_one_falling_behind_is_not() {
     );
     // From 150 ms on, it falls behind its command at 1 mm/s (a twentieth of its speed,
     // under a tenth: not a link collision either).
-    let stalled = steady_motion(|t| 10.0 + 1000.0 * (t - 0.15).max(0.0));
+    let stalled = steady_motion(0.020, |t| 10.0 + 1000.0 * (t - 0.15).max(0.0));
     assert_eq!(disturbances(&default, &stalled), 0, "an arm falling behind");
     assert!(
         disturbances(&growth, &stalled) > 0,
@@ -93,7 +105,7 @@ fn an_arm_being_stopped_over_tens_of_ms_is_no_disturbance() {
     // From 150 ms on, an obstacle that gives before it holds takes a growing part of the
     // commanded 20 mm/s away, up to 4 mm/s after 30 ms, and keeps it: the error's growth
     // steepens for 30 ms and never turns back.
-    let stopping = steady_motion(|t| {
+    let stopping = steady_motion(0.020, |t| {
         let (ramp, dt) = (0.03, (t - 0.15).max(0.0));
         let lost_um_s = 4000.0;
         10.0 + if dt < ramp {
@@ -124,7 +136,7 @@ fn free_motion_on_encoder_velocity(seed: u64, duration_s: f64) -> Trace {
 const JUMP_LEAK: &str = "unless = { feature = \"speed_unsettled\", above = 3.0 }, leak = 0.05 }";
 /// The default's jump while the finger moves slowly along the approach: a second gate
 /// leaking a tenth.
-const SLOW_LEAK: &str = "unless = { feature = \"approach_speed\", below = 12.0 }, leak = 0.1 }";
+const SLOW_LEAK: &str = "unless = { feature = \"speed_along\", below = 12.0 }, leak = 0.1 }";
 
 /// The default with its leaking gate `gate`, as written in `configs/approach.toml`, passing
 /// the fraction `leak` of the jump.
@@ -262,5 +274,23 @@ fn a_small_vibration_is_judged_while_the_finger_moves_along_the_approach() {
         disturbances(&any_speed, &slow),
         1,
         "the burst path at any speed misses the burst at 5 mm/s: the test no longer shows the gate's part"
+    );
+}
+
+#[test]
+fn an_arm_shaken_while_the_finger_moves_away_from_the_pad_is_a_disturbance() {
+    // A disturbance is judged while the arm is not held back: its lag, the error's growth
+    // beyond a tenth of the commanded travel. Moving away at 5 cm/s, the same swing.
+    let away = steady_motion(-0.050, shaken_error_um);
+    assert_eq!(
+        disturbances(&detector(APPROACH_TOML), &away),
+        1,
+        "an arm shaken while the finger moves away"
+    );
+    let signed = default_with(LAG, SIGNED_LAG);
+    assert_eq!(
+        disturbances(&signed, &away),
+        0,
+        "the lag on the signed velocity finds the disturbance too: the test no longer shows what the allowance's sign does"
     );
 }

@@ -98,12 +98,13 @@ pub fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
         .collect()
 }
 
-/// 500 ms at a steady commanded 20 mm/s along the approach, the position error along it
-/// `err_um(t)` (t in s from the start): nothing on the fingertip's sensors.
-pub fn steady_motion(err_um: impl Fn(f64) -> f64) -> Trace {
+/// 500 ms at a steady commanded `speed` [m/s] along the approach (below zero, away from
+/// the pad), the position error along it `err_um(t)` (t in s from the start): nothing on
+/// the fingertip's sensors.
+pub fn steady_motion(speed: f64, err_um: impl Fn(f64) -> f64) -> Trace {
     let t = times(2500);
     let err = t.iter().map(|&s| err_um(s) * 1e-6).collect();
-    let speed = vec![0.020; t.len()];
+    let speed = vec![speed; t.len()];
     trace_of(
         "steady motion",
         t,
