@@ -1044,7 +1044,7 @@ fn fit_writes_a_configuration_that_runs() {
     // Hard contacts never push the force sensor while the structure is quiet: that path
     // keeps the base's numbers, the film's paths are fitted.
     assert!(
-        toml.contains("force_push_free: kept the base's (weight 1)"),
+        toml.contains("force_push_still: kept the base's (weight 1)"),
         "{toml}"
     );
     // The link collision is not labelled: its numbers are the base's.
@@ -1098,7 +1098,7 @@ fn fit_writes_a_configuration_that_runs() {
     // contacts apart.
     let bad = dir.join("bad.toml");
     let mut replaced = base.clone();
-    for path in ["press_fast_free", "press_clear", "force_push_free"] {
+    for path in ["press_fast_free", "press_clear", "force_push_still"] {
         let term = format!("{{ feature = \"{path}\", weight = 1.0");
         assert!(replaced.contains(&term), "{term}");
         replaced = replaced.replacen(&term, "{ feature = \"acc_step\", weight = 1.0", 1);
