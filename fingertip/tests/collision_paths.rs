@@ -12,7 +12,9 @@ use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
-use support::{confirmed, default_with, detector, right, runs, steady_motion, times, trace_of};
+use support::{
+    confirmed, confirming_where_right, default_with, detector, steady_motion, times, trace_of,
+};
 
 /// The default's slow link-collision term, as written in `configs/approach.toml`.
 const CREEP_TERM: &str = "    { feature = \"creep_steady\", weight = 1.0, cdf = { sigmoid = { low = 20.0, high = 60.0 } } },\n";
@@ -93,16 +95,13 @@ const PUSHED_BACK: [(Scenario, u64); 5] = [
 fn a_knock_whose_push_comes_back_is_no_slow_collision() {
     let default = detector(APPROACH_TOML);
     let ungated = default_with(SWING_GATE, NO_SWING_GATE);
-    let mut read_as_collisions = 0;
-    for (s, seed) in PUSHED_BACK {
-        let run = runs(s, [seed], &SimOptions::default());
-        assert_eq!(right(&default, s, &run), [true], "{s:?} seed {seed}");
-        read_as_collisions += usize::from(
-            confirmed(&ungated, &run[0])
-                .iter()
-                .any(|e| e == "link_collision"),
-        );
-    }
+    let read_as_collisions = confirming_where_right(
+        &default,
+        &ungated,
+        &PUSHED_BACK,
+        &SimOptions::default(),
+        "link_collision",
+    );
     assert!(
         read_as_collisions >= 3,
         "without the gate, only {read_as_collisions} of the {} pushed arms confirm a link collision: the test no longer shows the gate's part",

@@ -17,7 +17,8 @@ use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    confirmed, default_with, detector, force_noise, outcomes, right, runs, times, trace_of,
+    confirmed, confirming_where_right, default_with, detector, force_noise, outcomes, right, runs,
+    times, trace_of,
 };
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
@@ -266,13 +267,8 @@ fn a_knock_whose_arm_swings_back_is_no_contact_on_the_force_sensor() {
         velocity_filter_hz: 250.0,
         ..SimOptions::default()
     };
-    let mut read_as_contacts = 0;
-    for (s, seed) in SWUNG_BACK {
-        let run = runs(s, [seed], &opts);
-        assert_eq!(right(&default, s, &run), [true], "{s:?} seed {seed}");
-        read_as_contacts +=
-            usize::from(confirmed(&ungated, &run[0]).iter().any(|e| e == "contact"));
-    }
+    let read_as_contacts =
+        confirming_where_right(&default, &ungated, &SWUNG_BACK, &opts, "contact");
     assert!(
         read_as_contacts >= 4,
         "without the gate, only {read_as_contacts} of the {} blows confirm a contact: the test no longer shows the gate's part",

@@ -53,6 +53,26 @@ pub fn default_with(written: &str, instead: &str) -> Detector {
     detector(&APPROACH_TOML.replacen(written, instead, 1))
 }
 
+/// Of the randomized runs `picked` (each a scenario and a run seed, as `fingertip evaluate`
+/// names them; the other options as in `base`), how many `changed` confirms `event` on,
+/// once `detector` is checked to get every one of them right.
+pub fn confirming_where_right(
+    detector: &Detector,
+    changed: &Detector,
+    picked: &[(Scenario, u64)],
+    base: &SimOptions,
+    event: &str,
+) -> usize {
+    picked
+        .iter()
+        .filter(|&&(s, seed)| {
+            let run = runs(s, [seed], base);
+            assert_eq!(right(detector, s, &run), [true], "{s:?} seed {seed}");
+            confirmed(changed, &run[0]).iter().any(|e| e == event)
+        })
+        .count()
+}
+
 /// The randomized runs of scenario `s` on seeds `seeds`, the other options as in `base`.
 pub fn runs(s: Scenario, seeds: impl IntoIterator<Item = u64>, base: &SimOptions) -> Vec<Trace> {
     seeds
