@@ -209,31 +209,23 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
 /// evaluate` names them) on an arm whose loops take their velocity from the encoders
 /// through a 250 Hz low-pass: each stopped its fingertip hard enough that, without the
 /// gate, the force sensor's push confirmed a contact 4-11 ms after the strike.
-const STOPPED_HARD: [u64; 4] = [
-    14_820_092_336_525_572_267,
-    14_820_092_336_525_572_612,
-    14_820_092_336_525_572_922,
-    14_820_092_336_525_572_944,
+const STOPPED_HARD: [(Scenario, u64); 4] = [
+    (Scenario::LinkCollision8, 14_820_092_336_525_572_267),
+    (Scenario::LinkCollision8, 14_820_092_336_525_572_612),
+    (Scenario::LinkCollision8, 14_820_092_336_525_572_922),
+    (Scenario::LinkCollision8, 14_820_092_336_525_572_944),
 ];
 
 #[test]
 fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
     let default = detector(APPROACH_TOML);
     let ungated = default_with(HELD_GATE, NO_HELD_GATE);
-    let s = Scenario::LinkCollision8;
     let opts = SimOptions {
         velocity_filter_hz: 250.0,
         ..SimOptions::default()
     };
-    let collisions = runs(s, STOPPED_HARD, &opts);
-    assert!(
-        right(&default, s, &collisions).iter().all(|&r| r),
-        "a link collision stopping the fingertip is not confirmed as one alone"
-    );
-    let read_as_contacts = collisions
-        .iter()
-        .filter(|tr| confirmed(&ungated, tr).iter().any(|e| e == "contact"))
-        .count();
+    let read_as_contacts =
+        confirming_where_right(&default, &ungated, &STOPPED_HARD, &opts, "contact");
     assert!(
         read_as_contacts >= 3,
         "without the gate, only {read_as_contacts} of the {} collisions confirm a contact: the test no longer shows the gate's part",
