@@ -9,7 +9,10 @@
 //!   accelerometer and the position error (both axes); binned by the best of the three;
 //! - very soft contacts: how fast the stress-rate film's reading rises over the 60 ms after
 //!   the onset (N/s, the mean of its last 40 ms over the mean before the onset), the signal
-//!   the contact's slow path judges (docs/simulator.md gives the film's event-free level).
+//!   the contact's slow path judges (docs/simulator.md gives the film's event-free level);
+//!   and how far the force sensor is pushed back by then (N, the mean of its last 30 ms
+//!   below the mean before the onset), the signal of its force path. A detector that
+//!   confirms a contact within 60 ms has no more than these 60 ms to judge by.
 //!
 //! A detector can only find an event whose signal stands out of the sensors' own reading;
 //! where the right share falls with the signal, the misses are at the sensors' reach. For
@@ -84,20 +87,38 @@ fn vibration_ratios(
     Some([ratio(&[&fx, &fy]), ratio(&[&acc]), ratio(&[&ex, &ey])])
 }
 
+/// How far channel `name` moved from the 20 ms before a contact's onset row `on` to its
+/// mean from `from_ms` to 60 ms after it.
+fn moved(tr: &Trace, name: &str, on: usize, from_ms: usize) -> Option<f64> {
+    let x = tr.column(name)?;
+    let mean = |r: std::ops::Range<usize>| x[r.clone()].iter().sum::<f64>() / r.len() as f64;
+    let before = on.saturating_sub(20 * MS)..on;
+    let after = on + from_ms * MS..(on + 60 * MS).min(tr.len());
+    (!before.is_empty() && !after.is_empty()).then(|| mean(after) - mean(before))
+}
+
 /// How fast the film's reading rose after a contact's onset (N/s).
 fn film_rise(tr: &Trace, on: usize) -> Option<f64> {
-    let film = tr.column("stress_rate")?;
-    let mean = |r: std::ops::Range<usize>| film[r.clone()].iter().sum::<f64>() / r.len() as f64;
-    let before = on.saturating_sub(20 * MS)..on;
-    let after = on + 20 * MS..(on + 60 * MS).min(tr.len());
-    (!before.is_empty() && !after.is_empty()).then(|| mean(after) - mean(before))
+    moved(tr, "stress_rate", on, 20)
+}
+
+/// How far the force sensor was pushed back 60 ms after a contact's onset (N): a contact
+/// makes force_x fall.
+fn force_push(tr: &Trace, on: usize) -> Option<f64> {
+    moved(tr, "force_x", on, 30).map(|m| -m)
+}
+
+/// A very soft contact's measures: the film's rise and the force sensor's push.
+fn contact_measure(tr: &Trace, on: usize) -> Option<Measure> {
+    Some(Measure::contact(film_rise(tr, on)?, force_push(tr, on)?))
 }
 
 /// The lead-in of a run's event-free twin (ms).
 const TWIN_LEAD_IN_MS: usize = 100;
 
-/// A window's measure: a very soft contact's film rise, or a disturbance's three
-/// vibration ratios and the best of them.
+/// A window's measure: a very soft contact's film rise (`best`) and, in `ratios`, the
+/// same and the force sensor's push; or a disturbance's three vibration ratios and the
+/// best of them.
 #[derive(Clone, Copy)]
 struct Measure {
     best: f64,
@@ -105,10 +126,10 @@ struct Measure {
 }
 
 impl Measure {
-    fn film(rise: f64) -> Measure {
+    fn contact(rise: f64, push: f64) -> Measure {
         Measure {
             best: rise,
-            ratios: [0.0; 3],
+            ratios: [rise, push, 0.0],
         }
     }
 
@@ -154,12 +175,12 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(Run, Measure)> {
     )
     .ok()?;
     if s == Scenario::ContactVerySoft1 {
-        // The film's rise is judged up to 60 ms after `on`: the twin's event is later.
+        // The contact is judged up to 60 ms after `on`: the twin's event is later.
         let run = Run {
-            measure: Measure::film(film_rise(&tr, on)?),
+            measure: contact_measure(&tr, on)?,
             right,
         };
-        return Some((run, Measure::film(film_rise(&twin, on)?)));
+        return Some((run, contact_measure(&twin, on)?));
     }
     let (before, after) = windows(on);
     let ratios = vibration_ratios(&tr, before.clone(), after.clone())?;
@@ -264,7 +285,7 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
         let (before, after) = windows(on);
         vibration_ratios(tr, before, after).map(Measure::vibration)
     };
-    let film = |tr: &Trace, on: usize| film_rise(tr, on).map(Measure::film);
+    let film = |tr: &Trace, on: usize| contact_measure(tr, on);
     let (free_vibration, free_film) = (free_windows(&vibration), free_windows(&film));
     println!(
         "{} recordings ({} of free motion, {} event-free windows), configs/approach.toml",
@@ -288,7 +309,7 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
                 let onset_s = tr.time().get(on).copied()?;
                 let right = is_right(detector, tr, Some((event, onset_s)))?;
                 let measure = if very_soft {
-                    Measure::film(film_rise(tr, on)?)
+                    contact_measure(tr, on)?
                 } else {
                     let (before, after) = windows(on);
                     Measure::vibration(vibration_ratios(tr, before, after)?)
@@ -409,11 +430,41 @@ fn print_event_free(measured: &Measured, place: &str, film: bool) {
         below.len(),
         100.0 * below.len() as f64 / results.len() as f64
     );
-    if !film {
-        let p99_of = |k: usize| {
-            let mut sensor: Vec<f64> = measured.event_free.iter().map(|m| m.ratios[k]).collect();
-            quantile(&mut sensor, 0.99)
-        };
+    let p99_of = |k: usize| {
+        let mut sensor: Vec<f64> = measured.event_free.iter().map(|m| m.ratios[k]).collect();
+        quantile(&mut sensor, 0.99)
+    };
+    if film {
+        let p99s = [p99_of(0), p99_of(1)];
+        let within: Vec<&Run> = results
+            .iter()
+            .filter(|r| r.measure.ratios.iter().zip(&p99s).all(|(v, p)| v < p))
+            .collect();
+        println!(
+            "  there, 99 % below {:.2} N/s on the film and {:.2} cN on the force sensor; {} of \
+             the events ({:.1} %) read below both, {} of them right",
+            p99s[0],
+            100.0 * p99s[1],
+            within.len(),
+            100.0 * within.len() as f64 / results.len() as f64,
+            within.iter().filter(|r| r.right).count()
+        );
+        let mut pushes: Vec<f64> = results.iter().map(|r| r.measure.ratios[1]).collect();
+        let threshold = quantile(&mut pushes, 0.005);
+        let free_pushes: Vec<f64> = measured.event_free.iter().map(|m| m.ratios[1]).collect();
+        let passed = free_pushes.iter().filter(|&&f| f >= threshold).count();
+        println!(
+            "  on the force sensor alone, a threshold passing 99.5 % of the events is at most \
+             {:.2} cN, which {:.1} % of the event-free windows reach (the largest: {:.2} cN)",
+            100.0 * threshold,
+            100.0 * passed as f64 / free_pushes.len() as f64,
+            100.0
+                * free_pushes
+                    .iter()
+                    .copied()
+                    .fold(f64::NEG_INFINITY, f64::max)
+        );
+    } else {
         let p99s = [p99_of(0), p99_of(1), p99_of(2)];
         let within: Vec<&Run> = results
             .iter()
