@@ -10,9 +10,11 @@
 //! a blow is a disturbance. For each `g`, over all runs:
 //! - how long after the onset the ten channels stay identical (the first row where any
 //!   differs): the shortest and the median;
-//! - how many of those blows are, in force and length, taps of the envelope (peaks of 1-15
-//!   N, 0.5-3 ms on a link: `large_disturbance`, `small_disturbance` and `knock`), a
-//!   half-sine there where the blow has the collision's shape;
+//! - the blows' peak force, and how many of them are, in force and length, taps of the
+//!   envelope (peaks of 1-15 N, 0.5-3 ms on a link: `large_disturbance`,
+//!   `small_disturbance` and `knock`), a half-sine there where the blow has the collision's
+//!   shape; and how many are taps of the force a separately written model strikes a link
+//!   with (5-15 N and 50-200 N; counted here as 5-200 N);
 //! - what the default detector confirms on the blow, and on how many of the collisions it
 //!   confirmed the collision before the readings part (it then confirms it on the blow).
 
@@ -31,6 +33,9 @@ const GIVE_WAY_MS: [f64; 6] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0];
 
 /// The envelope's taps: peak force (N) and length (s), on any body.
 const TAP_PEAK_N: (f64, f64) = (1.0, 15.0);
+/// The peak force of the taps a separately written model strikes a link with (N): its
+/// small ones 5-15 N and its large ones 50-200 N (docs/simulator.md, the third model).
+const OTHER_TAP_PEAK_N: (f64, f64) = (5.0, 200.0);
 const TAP_LENGTH_S: (f64, f64) = (0.0005, 0.003);
 
 /// The first confirmation and its time (s), if any.
@@ -45,8 +50,12 @@ fn first_confirmation(decisions: &[DecisionRecord]) -> Option<(&str, f64)> {
 struct Pair {
     /// How long after the onset the channels stay identical (s).
     identical_s: f64,
+    /// The blow's peak force (N).
+    peak_n: f64,
     /// The blow's peak force is a tap's, and its length too.
     tap_sized: bool,
+    /// The same with the peak force of the other model's taps on a link.
+    other_tap_sized: bool,
     /// The event the detector confirms first on the blow.
     on_blow: Option<String>,
     /// The detector confirmed the collision before the readings parted.
@@ -106,7 +115,10 @@ impl Collision {
         let freed = replay::replay(detector, &blow, |_, _, _| {}).ok()?;
         Some(Pair {
             identical_s: parted_s - self.onset_s,
+            peak_n: peak,
             tap_sized: (TAP_PEAK_N.0..=TAP_PEAK_N.1).contains(&peak)
+                && (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s),
+            other_tap_sized: (OTHER_TAP_PEAK_N.0..=OTHER_TAP_PEAK_N.1).contains(&peak)
                 && (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s),
             on_blow: first_confirmation(&freed).map(|(e, _)| e.to_string()),
             collision_before_parting: self.confirmed_s.is_some_and(|t| t < parted_s),
@@ -145,7 +157,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             base + runs - 1
         );
         println!(
-            "  gives way | identical for [ms]: min / median | tap-sized blows | the default on the blow: collision / disturbance / nothing | collisions it confirmed before the readings part"
+            "  gives way | identical for [ms]: min / median | the blow's peak [N]: median / 99 % / max | tap-sized blows: the envelope's, the other model's | the default on the blow: collision / disturbance / nothing | collisions it confirmed before the readings part"
         );
         for (i, g) in GIVE_WAY_MS.iter().enumerate() {
             let at: Vec<&Pair> = of.iter().map(|p| &p[i]).collect();
@@ -154,9 +166,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let count = |f: &dyn Fn(&Pair) -> bool| at.iter().filter(|p| f(p)).count();
             let on = |e: Option<&str>| count(&|p: &Pair| p.on_blow.as_deref() == e);
             let tap_sized = count(&|p: &Pair| p.tap_sized);
+            let other_tap_sized = count(&|p: &Pair| p.other_tap_sized);
+            // Peaks in kN through the latency's quantiles, which take seconds and give ms.
+            let peaks =
+                Latency::from_seconds(&at.iter().map(|p| p.peak_n / 1e3).collect::<Vec<_>>());
             println!(
-                "  {g:>6} ms | {shortest:>5.1} / {:>4.1} | {tap_sized:>4} ({:>4.1} %) | {:>4} / {:>4} / {:>4} | {:>4}",
+                "  {g:>6} ms | {shortest:>5.1} / {:>4.1} | {:>5.1} / {:>5.1} / {:>5.1} | {tap_sized:>4} ({:>4.1} %), {other_tap_sized:>4} | {:>4} / {:>4} / {:>4} | {:>4}",
                 Latency::from_seconds(&identical).median,
+                peaks.median,
+                peaks.p99,
+                peaks.max,
                 100.0 * tap_sized as f64 / at.len().max(1) as f64,
                 on(Some("link_collision")),
                 on(Some("disturbance")),
