@@ -333,7 +333,7 @@ fn the_force_sensors_usual_reading_follows_its_drift_lets_go_of_a_start_and_not_
         );
     };
     // The envelope's largest drift, falling, over 10 s: the usual reading follows it 0.25
-    // cN behind, a quarter of where the path starts; at 0.02 Hz, 4 cN behind.
+    // cN behind, a quarter of where the path starts; at 0.02 Hz, about 3 cN behind by then.
     bounds(
         &cruising(10.0, 0.02, -0.005, None),
         HELD_RATE,
