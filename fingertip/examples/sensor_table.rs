@@ -5,6 +5,7 @@
 //! `force_x` readings in the first 2 and 5 ms after the true onset, then the largest
 //! readings before the onsets and in sudden accelerations and free motion.
 
+use fingertip::score::nearest_rank;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 
@@ -22,13 +23,6 @@ fn run(s: Scenario, seed: u64, duration_s: Option<f64>) -> Result<Trace, sim::Si
 
 fn peak(x: &[f64]) -> f64 {
     x.iter().fold(0.0, |m, v| m.max(v.abs()))
-}
-
-/// The `q`-quantile (nearest rank) of `v`.
-fn quantile(v: &mut [f64], q: f64) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let k = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
-    v[k - 1]
 }
 
 fn column<'t>(tr: &'t Trace, name: &str) -> &'t [f64] {
@@ -68,10 +62,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
         }
         let cell = |v: &mut Vec<f64>| {
+            v.sort_by(f64::total_cmp);
             format!(
                 "{} / {}",
-                two_digits(quantile(v, 0.01)),
-                two_digits(quantile(v, 0.5))
+                two_digits(nearest_rank(v, 0.01)),
+                two_digits(nearest_rank(v, 0.5))
             )
         };
         let [a2, a5, f2, f5] = &mut cells;

@@ -23,7 +23,7 @@ mod seeds;
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
 use fingertip::replay::{self, DecisionRecord};
-use fingertip::score::Latency;
+use fingertip::score::{Latency, nearest_rank};
 use fingertip::sim::{self, CHANNELS, Scenario, SimOptions};
 use fingertip::trace::Trace;
 use rayon::prelude::*;
@@ -113,13 +113,13 @@ impl Collision {
         let parted_s = held.time()[parted];
         let peak: f64 = blow.meta("obstacle_peak_force_n")?.parse().ok()?;
         let freed = replay::replay(detector, &blow, |_, _, _| {}).ok()?;
+        let tap_length = (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s);
         Some(Pair {
             identical_s: parted_s - self.onset_s,
             peak_n: peak,
-            tap_sized: (TAP_PEAK_N.0..=TAP_PEAK_N.1).contains(&peak)
-                && (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s),
-            other_tap_sized: (OTHER_TAP_PEAK_N.0..=OTHER_TAP_PEAK_N.1).contains(&peak)
-                && (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s),
+            tap_sized: tap_length && (TAP_PEAK_N.0..=TAP_PEAK_N.1).contains(&peak),
+            other_tap_sized: tap_length
+                && (OTHER_TAP_PEAK_N.0..=OTHER_TAP_PEAK_N.1).contains(&peak),
             on_blow: first_confirmation(&freed).map(|(e, _)| e.to_string()),
             collision_before_parting: self.confirmed_s.is_some_and(|t| t < parted_s),
         })
@@ -167,15 +167,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let on = |e: Option<&str>| count(&|p: &Pair| p.on_blow.as_deref() == e);
             let tap_sized = count(&|p: &Pair| p.tap_sized);
             let other_tap_sized = count(&|p: &Pair| p.other_tap_sized);
-            // Peaks in kN through the latency's quantiles, which take seconds and give ms.
-            let peaks =
-                Latency::from_seconds(&at.iter().map(|p| p.peak_n / 1e3).collect::<Vec<_>>());
+            let mut peaks: Vec<f64> = at.iter().map(|p| p.peak_n).collect();
+            peaks.sort_by(f64::total_cmp);
             println!(
                 "  {g:>6} ms | {shortest:>5.1} / {:>4.1} | {:>5.1} / {:>5.1} / {:>5.1} | {tap_sized:>4} ({:>4.1} %), {other_tap_sized:>4} | {:>4} / {:>4} / {:>4} | {:>4}",
                 Latency::from_seconds(&identical).median,
-                peaks.median,
-                peaks.p99,
-                peaks.max,
+                nearest_rank(&peaks, 0.5),
+                nearest_rank(&peaks, 0.99),
+                nearest_rank(&peaks, 1.0),
                 100.0 * tap_sized as f64 / at.len().max(1) as f64,
                 on(Some("link_collision")),
                 on(Some("disturbance")),

@@ -37,6 +37,7 @@ use rayon::prelude::*;
 use crate::corpus::{CorpusReport, RecordingResult};
 use crate::features::{FeatureSamples, best_threshold};
 use crate::replay::{DecisionRecord, StreamError, replay_stream_each};
+use crate::score::nearest_rank;
 use crate::trace::TraceReader;
 
 /// The least balanced accuracy of a sensor term's feature against its event for the fit
@@ -139,15 +140,6 @@ fn sigmoid_bounds(low: f64, high: f64) -> (f32, f32) {
     let high = round4(high).clamp(-TOP, TOP);
     let below = round4(f64::from(high) - gap(f64::from(high), 0.0)).max(-TOP - 1.0);
     (round4(low).clamp(-TOP - 1.0, TOP).min(below), high)
-}
-
-/// The value at quantile `p` of sorted values (nearest rank).
-fn quantile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return 0.0;
-    }
-    let k = ((p * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
-    sorted[k - 1]
 }
 
 fn sorted(v: &[f64]) -> Vec<f64> {
@@ -253,8 +245,8 @@ pub fn fit_terms(base: &Config, samples: &FeatureSamples) -> Result<(Config, Vec
                     event: event.name.clone(),
                     threshold: round4(threshold),
                     accuracy,
-                    event_median: round4(quantile(&values, 0.5)),
-                    outside_median: round4(quantile(&others, 0.5)),
+                    event_median: round4(nearest_rank(&values, 0.5)),
+                    outside_median: round4(nearest_rank(&others, 0.5)),
                 });
                 continue;
             }
@@ -381,14 +373,14 @@ fn fit_sensor(
     (threshold, above): (f64, bool),
 ) -> (CdfSpec, String) {
     if !falling {
-        let mut low = quantile(outside, 0.99999);
-        let mut high = quantile(reached, 0.1);
+        let mut low = nearest_rank(outside, 0.99999);
+        let mut high = nearest_rank(reached, 0.1);
         let mut how = "from the 99.999 % quantile outside events to what 90 % of the events reach";
         if high <= low + gap(low, high) {
             // Most events peak inside the outside tail: start where one threshold
             // separates best and end where most of the event is.
             low = if above { threshold } else { low };
-            high = quantile(event, 0.9).max(low + gap(low, high));
+            high = nearest_rank(event, 0.9).max(low + gap(low, high));
             how = "from the best single threshold to the event's 90 % quantile (most events peak within the outside tail)";
         }
         let (low, high) = sigmoid_bounds(low, high);
@@ -401,13 +393,13 @@ fn fit_sensor(
             format!("rising {low}..{high}, {how}"),
         )
     } else {
-        let mut high = quantile(outside, 0.00001);
-        let mut low = quantile(reached, 0.9);
+        let mut high = nearest_rank(outside, 0.00001);
+        let mut low = nearest_rank(reached, 0.9);
         let mut how =
             "falling from what 90 % of the events reach to the 0.1 % quantile outside events";
         if low >= high - gap(low, high) {
             high = if above { high } else { threshold };
-            low = quantile(event, 0.1).min(high - gap(low, high));
+            low = nearest_rank(event, 0.1).min(high - gap(low, high));
             how = "falling from the event's 10 % quantile to the best single threshold (most events peak within the outside tail)";
         }
         let (low, high) = sigmoid_bounds(low, high);
@@ -424,7 +416,7 @@ fn fit_sensor(
 
 /// A context term: the base's, widened where the event's central 95 % lies beyond it.
 fn fit_context(base: &CdfSpec, event: &[f64]) -> (CdfSpec, String) {
-    let (q025, q975) = (quantile(event, 0.025), quantile(event, 0.975));
+    let (q025, q975) = (nearest_rank(event, 0.025), nearest_rank(event, 0.975));
     let central = format!(
         "the event's central 95 % is {}..{}",
         round4(q025),

@@ -106,22 +106,25 @@ pub struct Latency {
     pub max: f64,
 }
 
+/// The value at quantile `q` of `sorted` (ascending) by nearest rank: the smallest value
+/// that at least a share `q` of the values are at or below; 0 when there is none.
+pub fn nearest_rank(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let k = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[k - 1]
+}
+
 impl Latency {
     /// From latencies in seconds (nearest-rank percentiles); all zero when empty.
     pub fn from_seconds(latencies: &[f64]) -> Latency {
         let mut ms: Vec<f64> = latencies.iter().map(|s| s * 1e3).collect();
         ms.sort_by(f64::total_cmp);
-        let rank = |p: f64| -> f64 {
-            if ms.is_empty() {
-                return 0.0;
-            }
-            let k = ((p * ms.len() as f64).ceil() as usize).clamp(1, ms.len());
-            ms[k - 1]
-        };
         Latency {
-            median: rank(0.5),
-            p95: rank(0.95),
-            p99: rank(0.99),
+            median: nearest_rank(&ms, 0.5),
+            p95: nearest_rank(&ms, 0.95),
+            p99: nearest_rank(&ms, 0.99),
             max: ms.last().copied().unwrap_or(0.0),
         }
     }
