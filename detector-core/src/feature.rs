@@ -1811,13 +1811,25 @@ fn triangular(taps: &mut [u32]) {
     }
 }
 
-/// Seeds for [`isqrt32`]: √ of the middle of each 2²⁶-wide slice of [2³⁰, 2³²), within
-/// 1.6 % of the root anywhere in the slice.
-const SQRT_SEEDS: [u16; 48] = [
-    33268, 34263, 35229, 36169, 37085, 37980, 38853, 39708, 40544, 41364, 42167, 42956, 43730,
-    44491, 45239, 45975, 46699, 47412, 48115, 48807, 49490, 50163, 50828, 51484, 52132, 52771,
-    53403, 54028, 54646, 55256, 55860, 56458, 57049, 57634, 58214, 58787, 59355, 59918, 60475,
-    61028, 61575, 62118, 62656, 63189, 63718, 64242, 64762, 65278,
+/// Seeds for [`isqrt32`]: √ of the middle of each 2²⁴-wide slice of [2³⁰, 2³²), within
+/// 129 of the root anywhere in the slice, so that one Newton step lands on the root or one
+/// above it.
+const SQRT_SEEDS: [u16; 192] = [
+    32896, 33150, 33402, 33652, 33900, 34147, 34392, 34635, 34876, 35116, 35354, 35590, 35825,
+    36059, 36291, 36521, 36750, 36978, 37204, 37429, 37652, 37874, 38095, 38315, 38533, 38750,
+    38966, 39181, 39394, 39606, 39818, 40028, 40237, 40445, 40652, 40857, 41062, 41266, 41469,
+    41671, 41871, 42071, 42270, 42468, 42665, 42861, 43057, 43251, 43445, 43637, 43829, 44020,
+    44210, 44400, 44588, 44776, 44963, 45149, 45334, 45519, 45703, 45886, 46069, 46250, 46431,
+    46612, 46791, 46970, 47149, 47326, 47503, 47679, 47855, 48030, 48204, 48378, 48551, 48723,
+    48895, 49067, 49237, 49407, 49577, 49746, 49914, 50082, 50249, 50416, 50582, 50747, 50912,
+    51077, 51241, 51404, 51567, 51730, 51892, 52053, 52214, 52374, 52534, 52694, 52853, 53011,
+    53169, 53327, 53484, 53640, 53797, 53952, 54108, 54262, 54417, 54571, 54724, 54877, 55030,
+    55182, 55334, 55485, 55636, 55787, 55937, 56087, 56236, 56385, 56534, 56682, 56830, 56977,
+    57124, 57271, 57417, 57563, 57709, 57854, 57999, 58143, 58287, 58431, 58574, 58717, 58860,
+    59002, 59144, 59286, 59427, 59568, 59709, 59849, 59989, 60129, 60268, 60407, 60546, 60684,
+    60822, 60960, 61098, 61235, 61372, 61508, 61644, 61780, 61916, 62051, 62186, 62321, 62456,
+    62590, 62724, 62857, 62991, 63124, 63256, 63389, 63521, 63653, 63785, 63916, 64047, 64178,
+    64309, 64439, 64569, 64699, 64828, 64957, 65086, 65215, 65344, 65472,
 ];
 
 /// ⌊√n⌋ for a 32-bit `n`: `n` shifted left by an even count into [2³⁰, 2³²), its root
@@ -1832,15 +1844,15 @@ fn isqrt32(n: u32) -> u32 {
     normal_root(n << shift) >> (shift / 2)
 }
 
-/// ⌊√m⌋ for `m` in [2³⁰, 2³²): a seed from [`SQRT_SEEDS`], two Newton steps with 32-bit
-/// division (in hardware on the Cortex-M4), which leave the root or one above it, and a
-/// final correction.
+/// ⌊√m⌋ for `m` in [2³⁰, 2³²): a seed from [`SQRT_SEEDS`], one Newton step with 32-bit
+/// division (in hardware on the Cortex-M4), which leaves the root or one above it (the
+/// step never falls below ⌊√m⌋, and overshoots by at most 129² / 2¹⁶ < 1), and a final
+/// correction.
 #[inline]
 fn normal_root(m: u32) -> u32 {
-    // m ≥ 2^30, so the index is 16..=63 and `min` only spares a bounds check.
-    let mut x = u32::from(SQRT_SEEDS[((m >> 26) as usize).wrapping_sub(16).min(47)]);
-    // x ≥ 2^15 throughout, so the divisions never meet zero.
-    x = (x + m.checked_div(x).unwrap_or(0)) / 2;
+    // m ≥ 2^30, so the index is 64..=255 and `min` only spares a bounds check.
+    let mut x = u32::from(SQRT_SEEDS[((m >> 24) as usize).wrapping_sub(64).min(191)]);
+    // x ≥ 2^15, so the division never meets zero.
     x = (x + m.checked_div(x).unwrap_or(0)) / 2;
     if u64::from(x) * u64::from(x) > u64::from(m) {
         x -= 1;
@@ -1912,8 +1924,8 @@ mod tests {
         // Every seed slice's ends and middle, at every even shift, and around every square
         // of a sparse sweep of roots (the correction step's edge).
         for shift in (0..32).step_by(2) {
-            for k in 16u64..=64 {
-                for m in [(k << 26) - 1, k << 26, (k << 26) + (1 << 25)] {
+            for k in 64u64..=256 {
+                for m in [(k << 24) - 1, k << 24, (k << 24) + (1 << 23)] {
                     let n = (m >> shift).min(u32::MAX as u64);
                     assert!(is_floor(n), "n = {n}");
                 }
