@@ -13,15 +13,14 @@
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::replay::replay;
 use fingertip::score::Outcome;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    confirmed, confirming_where_right, default_with, detector, force_noise, outcomes, right, runs,
-    times, trace_of,
+    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, outcomes,
+    right, runs, times, trace_of,
 };
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
@@ -308,24 +307,19 @@ fn cruising(seconds: f64, speed: f64, force: impl Fn(f64) -> f64) -> Trace {
     )
 }
 
-/// When `detector` first confirms a contact on `trace`, if it does [s].
-fn contact_at(detector: &Detector, trace: &Trace) -> Option<f64> {
-    replay(detector, trace, |_, _, _| {})
-        .expect("replays")
-        .iter()
-        .find(|d| d.is_confirm() && d.event == "contact")
-        .map(|d| d.t_s)
-}
-
 #[test]
 fn the_force_sensors_usual_reading_follows_its_drift_lets_go_of_a_start_and_not_a_rise() {
     let default = detector(APPROACH_TOML);
     // No contact on `trace` with the default; one with `part` of its usual reading replaced
     // by `instead`.
     let bounds = |trace: &Trace, part: &str, instead: &str| {
-        assert_eq!(contact_at(&default, trace), None, "a contact confirmed");
+        assert_eq!(
+            confirmed_at(&default, trace, "contact"),
+            None,
+            "a contact confirmed"
+        );
         assert!(
-            contact_at(&held_with(part, instead), trace).is_some(),
+            confirmed_at(&held_with(part, instead), trace, "contact").is_some(),
             "with `{instead}` for `{part}`, nothing is confirmed either: the test no longer shows that part's bound"
         );
     };
@@ -358,9 +352,10 @@ fn the_force_sensors_usual_reading_follows_its_drift_lets_go_of_a_start_and_not_
     // nothing else to find it by: found, and sooner than where the usual reading follows
     // at 0.5 Hz and takes in more of the rise.
     let touched = cruising(0.4, 0.01, |t| -0.4 * (t - 0.1).max(0.0));
-    let found = contact_at(&default, &touched).expect("the contact is found");
+    let found = confirmed_at(&default, &touched, "contact").expect("the contact is found");
     let followed_faster = held_with(HELD_RATE, "cutoff_hz = 0.5");
-    let found_at_half_hz = contact_at(&followed_faster, &touched).expect("found at 0.5 Hz");
+    let found_at_half_hz =
+        confirmed_at(&followed_faster, &touched, "contact").expect("found at 0.5 Hz");
     assert!(
         found < found_at_half_hz,
         "found {:.1} ms after the touch, at 0.5 Hz {:.1} ms",
@@ -384,12 +379,12 @@ fn a_fingertip_ringing_steadily_is_no_contact_on_the_force_sensor() {
     });
     let default = detector(APPROACH_TOML);
     assert_eq!(
-        contact_at(&default, &ringing),
+        confirmed_at(&default, &ringing, "contact"),
         None,
         "a ringing read as a contact"
     );
     assert!(
-        contact_at(&default_with(CALM_GATE, NO_CALM_GATE), &ringing).is_some(),
+        confirmed_at(&default_with(CALM_GATE, NO_CALM_GATE), &ringing, "contact").is_some(),
         "without the gate the ringing confirms no contact either: the test no longer shows the gate's part"
     );
     // A steady ringing of a fifth of that, 0.12 N (72 cN^2, as steady motion here reads),

@@ -64,21 +64,52 @@ pub struct Feed {
     pub rows: Vec<[f64; 10]>,
 }
 
+/// The channels a controller's context frame carries, in a feed row's order after the four
+/// analog ones: each with its step in the frame (0.1 mm/s, 2 mm/s², 1 µm) and its largest
+/// raw value.
+pub const FRAMED: [(&str, f64, i16); 6] = [
+    ("vel_des_x", 1e-4, 4095),
+    ("vel_des_y", 1e-4, 4095),
+    ("acc_des_x", 2e-3, 4095),
+    ("acc_des_y", 2e-3, 4095),
+    ("pos_err_x", 1e-6, 32767),
+    ("pos_err_y", 1e-6, 32767),
+];
+
+/// `v` in a frame's raw steps of `step`, within ±`max`.
+fn raw(v: f64, step: f64, max: i16) -> i16 {
+    (v / step).round().clamp(-f64::from(max), f64::from(max)) as i16
+}
+
+/// `trace` with its context channels as the controller's frames carry them, rounded to
+/// their steps: what the board's detector reads of it.
+pub fn framed(trace: &fingertip::trace::Trace) -> fingertip::trace::Trace {
+    let channels = trace
+        .channel_names()
+        .iter()
+        .map(|n| {
+            let column = trace.column(n).unwrap();
+            let values = match FRAMED.iter().find(|(f, ..)| f == n) {
+                Some(&(_, step, max)) => column
+                    .iter()
+                    .map(|&v| f64::from(raw(v, step, max)) * step)
+                    .collect(),
+                None => column.to_vec(),
+            };
+            (n.clone(), values)
+        })
+        .collect();
+    fingertip::trace::Trace::from_columns(trace.name(), trace.time().to_vec(), channels).unwrap()
+}
+
 impl Feed {
     /// The ten board channels of `traces`, one after the other.
     pub fn new(traces: &[fingertip::trace::Trace]) -> Feed {
-        let names = [
-            "force_x",
-            "force_y",
-            "skin_accel",
-            "stress_rate",
-            "vel_des_x",
-            "vel_des_y",
-            "acc_des_x",
-            "acc_des_y",
-            "pos_err_x",
-            "pos_err_y",
-        ];
+        let analog = ["force_x", "force_y", "skin_accel", "stress_rate"];
+        let names: [&str; 10] = std::array::from_fn(|k| match k {
+            0..4 => analog[k],
+            _ => FRAMED[k - 4].0,
+        });
         let mut rows = Vec::new();
         for t in traces {
             let columns = names.map(|n| t.column(n).unwrap());
@@ -159,8 +190,9 @@ impl Fingertip {
         }
         let arrived = self.tick == 0 || feed.row(self.tick - 1)[4..] != row[4..];
         if arrived || self.tick.is_multiple_of(5) {
-            let raw = |v: f64, step: f64, max: i16| {
-                (v / step).round().clamp(-f64::from(max), f64::from(max)) as i16
+            let framed = |k: usize| {
+                let (_, step, max) = FRAMED[k];
+                raw(row[4 + k], step, max)
             };
             let node = NodeId::new(3).unwrap();
             let mut m = ContextMsg {
@@ -169,9 +201,9 @@ impl Fingertip {
                 ..ContextMsg::default()
             };
             m.slots[ContextGroup::slot_of(node)] = Some(ContextSlot {
-                vel_des: [raw(row[4], 1e-4, 4095), raw(row[5], 1e-4, 4095)],
-                acc_des: [raw(row[6], 2e-3, 4095), raw(row[7], 2e-3, 4095)],
-                pos_err: [raw(row[8], 1e-6, 32767), raw(row[9], 1e-6, 32767)],
+                vel_des: [framed(0), framed(1)],
+                acc_des: [framed(2), framed(3)],
+                pos_err: [framed(4), framed(5)],
             });
             let frame = m.encode(ContextGroup::of(node)).unwrap();
             self.counter = self.counter.wrapping_add(1);

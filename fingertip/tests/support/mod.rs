@@ -110,6 +110,15 @@ pub fn confirmed(detector: &Detector, trace: &Trace) -> Vec<String> {
         .collect()
 }
 
+/// When `detector` first confirms `event` on `trace` [s].
+pub fn confirmed_at(detector: &Detector, trace: &Trace, event: &str) -> Option<f64> {
+    replay(detector, trace, |_, _, _| {})
+        .expect("replays")
+        .iter()
+        .find(|d| d.is_confirm() && d.event == event)
+        .map(|d| d.t_s)
+}
+
 /// Whether `detector` gets each of `traces` (runs of `s`) right.
 pub fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
     outcomes(detector, s, traces)
