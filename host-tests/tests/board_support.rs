@@ -82,7 +82,7 @@ fn raw(v: f64, step: f64, max: i16) -> i16 {
 }
 
 /// `trace` with its context channels as the controller's frames carry them, rounded to
-/// their steps: what the board's detector reads of it.
+/// their steps, and its phases: what the board's detector reads of it.
 pub fn framed(trace: &fingertip::trace::Trace) -> fingertip::trace::Trace {
     let channels = trace
         .channel_names()
@@ -99,7 +99,12 @@ pub fn framed(trace: &fingertip::trace::Trace) -> fingertip::trace::Trace {
             (n.clone(), values)
         })
         .collect();
-    fingertip::trace::Trace::from_columns(trace.name(), trace.time().to_vec(), channels).unwrap()
+    let out = fingertip::trace::Trace::from_columns(trace.name(), trace.time().to_vec(), channels)
+        .unwrap();
+    match trace.phase() {
+        Some(phase) => out.with_phase(phase.clone()).unwrap(),
+        None => out,
+    }
 }
 
 impl Feed {
