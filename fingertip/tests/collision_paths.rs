@@ -93,11 +93,9 @@ const PUSHED_BACK: [(Scenario, u64); 5] = [
 
 #[test]
 fn a_knock_whose_push_comes_back_is_no_slow_collision() {
-    let default = detector(APPROACH_TOML);
-    let ungated = default_with(SWING_GATE, NO_SWING_GATE);
     let read_as_collisions = confirming_where_right(
-        &default,
-        &ungated,
+        SWING_GATE,
+        NO_SWING_GATE,
         &PUSHED_BACK,
         &SimOptions::default(),
         "link_collision",

@@ -226,14 +226,7 @@ fn contacts_at_250_hz_without(gate: &str, open: &str, picked: &[(Scenario, u64)]
         velocity_filter_hz: 250.0,
         ..SimOptions::default()
     };
-    let default = detector(APPROACH_TOML);
-    confirming_where_right(
-        &default,
-        &default_with(gate, open),
-        picked,
-        &opts,
-        "contact",
-    )
+    confirming_where_right(gate, open, picked, &opts, "contact")
 }
 
 #[test]

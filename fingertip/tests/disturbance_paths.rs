@@ -387,11 +387,9 @@ const SWUNG_COLLISIONS: [(Scenario, u64); 7] = [
 
 #[test]
 fn a_collision_swinging_its_arm_back_unstruck_is_no_disturbance() {
-    let default = detector(APPROACH_TOML);
-    let swing_taken_always = default_with(STRUCK_GATE, NO_STRUCK_GATE);
     let read_as_disturbances = confirming_where_right(
-        &default,
-        &swing_taken_always,
+        STRUCK_GATE,
+        NO_STRUCK_GATE,
         &SWUNG_COLLISIONS,
         &SimOptions::default(),
         "disturbance",

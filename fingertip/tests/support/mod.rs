@@ -54,21 +54,23 @@ pub fn default_with(written: &str, instead: &str) -> Detector {
 }
 
 /// Of the randomized runs `picked` (each a scenario and a run seed, as `fingertip evaluate`
-/// names them; the other options as in `base`), how many `changed` confirms `event` on,
-/// once `detector` is checked to get every one of them right.
+/// names them; the other options as in `base`), how many the default detector confirms
+/// `event` on once `written` in its configuration is `instead` (see [`default_with`]),
+/// the default itself checked to get every one of them right.
 pub fn confirming_where_right(
-    detector: &Detector,
-    changed: &Detector,
+    written: &str,
+    instead: &str,
     picked: &[(Scenario, u64)],
     base: &SimOptions,
     event: &str,
 ) -> usize {
+    let (default, changed) = (detector(APPROACH_TOML), default_with(written, instead));
     picked
         .iter()
         .filter(|&&(s, seed)| {
             let run = runs(s, [seed], base);
-            assert_eq!(right(detector, s, &run), [true], "{s:?} seed {seed}");
-            confirmed(changed, &run[0]).iter().any(|e| e == event)
+            assert_eq!(right(&default, s, &run), [true], "{s:?} seed {seed}");
+            confirmed(&changed, &run[0]).iter().any(|e| e == event)
         })
         .count()
 }
