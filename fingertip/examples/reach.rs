@@ -196,6 +196,14 @@ struct Measured {
     target_ms: Option<usize>,
 }
 
+impl Measured {
+    /// Whether these are very soft contacts' measures (the film's rise and the force
+    /// sensor's push), which have no window of their own for a latency target.
+    fn film(&self) -> bool {
+        self.target_ms.is_none()
+    }
+}
+
 /// One simulated run and the measures on its event-free twin.
 fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(Run, Measures)> {
     let opts = SimOptions {
@@ -380,7 +388,7 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
 /// contacts), with the right share, and the event-free comparison (its windows taken at
 /// `place`), within a disturbance's latency target too.
 fn print_scenario(name: &str, measured: &Measured, place: &str) {
-    let film = measured.target_ms.is_none();
+    let film = measured.film();
     let results = &measured.runs;
     let (edges, what): (&[f64], &str) = if film {
         (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]")
@@ -435,7 +443,7 @@ fn print_scenario(name: &str, measured: &Measured, place: &str) {
             100.0 * right as f64 / inside.len() as f64
         );
     }
-    print_event_free(measured, place, film);
+    print_event_free(measured, place);
     if let Some(target_ms) = measured.target_ms {
         print_within_target(measured, target_ms);
     }
@@ -479,7 +487,7 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
 
 /// How high the measure reads where nothing happens (`place`), on each sensor too for a
 /// disturbance's, and how many events read below that.
-fn print_event_free(measured: &Measured, place: &str, film: bool) {
+fn print_event_free(measured: &Measured, place: &str) {
     let results = &measured.runs;
     let mut free: Vec<f64> = measured.event_free.iter().map(|m| m.whole.best).collect();
     if free.is_empty() || results.is_empty() {
@@ -516,7 +524,7 @@ fn print_event_free(measured: &Measured, place: &str, film: bool) {
             .filter(|r| r.measures.whole.ratios.iter().zip(p99s).all(|(v, p)| v < p))
             .collect()
     };
-    if film {
+    if measured.film() {
         let p99s = [p99_of(0), p99_of(1)];
         let within = below_all(&p99s);
         println!(
