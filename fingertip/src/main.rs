@@ -351,6 +351,12 @@ enum Command {
         /// binned by, coloured by outcome (.png or .svg; the first configuration's).
         #[arg(long, conflicts_with = "traces")]
         plot_bins: Option<PathBuf>,
+        /// Also write one row per run here (.csv): its scenario, seed and bin, each
+        /// detector's outcome, latency and peak confidence, and everything the run drew
+        /// (its `param.*` and what was struck, as `fingertip simulate` records them), to
+        /// look for a weak region along any parameter, not only the binned one.
+        #[arg(long, conflicts_with = "traces")]
+        runs_csv: Option<PathBuf>,
     },
     /// Each feature's values in labelled events and outside them, from recordings: how
     /// well one threshold on it tells each event from the rest, and a figure.
@@ -631,6 +637,7 @@ fn run(cli: Cli) -> Result<()> {
             ranges,
             json,
             plot_bins,
+            runs_csv,
             ..
         } => evaluate(
             Plan {
@@ -646,7 +653,7 @@ fn run(cli: Cli) -> Result<()> {
                 ranges,
             },
             &config,
-            (json.as_deref(), plot_bins.as_deref()),
+            (json.as_deref(), plot_bins.as_deref(), runs_csv.as_deref()),
         ),
         Command::Features {
             traces,
@@ -1718,10 +1725,38 @@ struct JobResult {
     bin: Option<sim::RunBin>,
     /// Simulated time (s).
     seconds: f64,
+    /// What the run drew ([`drawn`]), when a table of the runs is asked for; else empty.
+    drawn: Vec<(String, String)>,
+}
+
+/// The metadata of a simulated run that can differ from one run to the next: its drawn
+/// parameters, what was struck and where, its onset. Left out: the scenario and seed (a
+/// table's own columns) and what every run shares (units, full scales, the rates, the
+/// description).
+fn drawn(trace: &Trace) -> Vec<(String, String)> {
+    const SHARED: [&str; 7] = [
+        "scenario",
+        "description",
+        "expected",
+        "seed",
+        "randomized",
+        "rate_hz",
+        "internal_rate_hz",
+    ];
+    trace
+        .metadata()
+        .iter()
+        .filter(|(k, _)| {
+            !(SHARED.contains(&k.as_str())
+                || k.starts_with("unit.")
+                || k.starts_with("full_scale."))
+        })
+        .cloned()
+        .collect()
 }
 
 /// Simulates one job and scores it with each detector.
-fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
+fn run_job(detectors: &[Detector], job: Job, plan: &Plan, keep_drawn: bool) -> Result<JobResult> {
     let scenario = job.scenario();
     let seed = job.seed(plan.seed);
     let opts = SimOptions {
@@ -1768,16 +1803,22 @@ fn run_job(detectors: &[Detector], job: Job, plan: &Plan) -> Result<JobResult> {
         peaks,
         bin: scenario.run_bin(&trace),
         seconds: trace.len() as f64 / trace.rate_hz(),
+        drawn: if keep_drawn {
+            drawn(&trace)
+        } else {
+            Vec::new()
+        },
     })
 }
 
 /// Runs the plan's runs of every single-event scenario and `free_runs` stretches of free
 /// motion on all cores behind a progress bar; the results in job order and the wall time
-/// taken (s).
+/// taken (s). With `keep_drawn`, each result keeps what its run drew.
 fn run_jobs(
     detectors: &[Detector],
     plan: &Plan,
     free_runs: usize,
+    keep_drawn: bool,
 ) -> Result<(Vec<JobResult>, f64)> {
     let runs = plan.runs;
     let jobs = Scenario::single_event().len() * runs + free_runs;
@@ -1790,7 +1831,7 @@ fn run_jobs(
         .into_par_iter()
         .with_max_len(1)
         .map(|i| {
-            let result = run_job(detectors, Job::at(i, runs), plan);
+            let result = run_job(detectors, Job::at(i, runs), plan, keep_drawn);
             bar.inc(1);
             result
         })
@@ -2047,7 +2088,7 @@ fn load_detectors(configs: &[PathBuf]) -> Result<(Vec<Detector>, Vec<String>)> {
 fn evaluate(
     plan: Plan,
     configs: &[PathBuf],
-    (json, plot_bins): (Option<&Path>, Option<&Path>),
+    (json, plot_bins, runs_csv): (Option<&Path>, Option<&Path>, Option<&Path>),
 ) -> Result<()> {
     let Plan {
         runs,
@@ -2068,6 +2109,7 @@ fn evaluate(
         &[
             json.map(|p| (p, Kind::File)),
             plot_bins.map(|p| (p, Kind::Figure)),
+            runs_csv.map(|p| (p, Kind::File)),
         ],
     )?;
     if !(1..=MAX_RUNS).contains(&runs) {
@@ -2130,7 +2172,7 @@ fn evaluate(
         r.check().map_err(|e| anyhow!("--range {e}"))?;
     }
     let free_runs = (free_hours * 3600.0 / FREE_RUN_S).ceil() as usize;
-    let (results, wall) = run_jobs(&detectors, &plan, free_runs)?;
+    let (results, wall) = run_jobs(&detectors, &plan, free_runs, runs_csv.is_some())?;
     let tallies: Vec<(String, Tally)> = names
         .into_iter()
         .enumerate()
@@ -2216,6 +2258,10 @@ fn evaluate(
         let slot = usize::from(json.is_some());
         plot::write_bins(outputs.staging(slot), &bin_panels(&results))?;
     }
+    if runs_csv.is_some() {
+        let slot = usize::from(json.is_some()) + usize::from(plot_bins.is_some());
+        outputs.write(slot, runs_table(&results, tallies.len()).as_bytes())?;
+    }
     outputs.commit()?;
     Ok(())
 }
@@ -2258,6 +2304,107 @@ fn bin_panels(results: &[JobResult]) -> Vec<plot::BinPanel> {
             })
         })
         .collect()
+}
+
+/// `--runs-csv`: one row per run in job order, with `detectors` detectors' columns (named
+/// plainly for one detector, suffixed `_1`, `_2`... in `--config` order for several), then
+/// one column per metadata entry any run drew, in the order first met, empty where a run
+/// did not draw it. An outcome is `right`, `wrong`, `missed`, `repeated` or, where nothing
+/// is expected, `quiet`; latencies are from the true onset, the wrong confirmation's time
+/// from the run's start, both in ms.
+fn runs_table(results: &[JobResult], detectors: usize) -> String {
+    let mut keys: Vec<&str> = Vec::new();
+    for r in results {
+        for (k, _) in &r.drawn {
+            if !keys.contains(&k.as_str()) {
+                keys.push(k);
+            }
+        }
+    }
+    let suffix = |d: usize| {
+        if detectors == 1 {
+            String::new()
+        } else {
+            format!("_{}", d + 1)
+        }
+    };
+    let mut header = vec![
+        "scenario".to_string(),
+        "run".into(),
+        "seed".into(),
+        "bin".into(),
+    ];
+    for d in 0..detectors {
+        for col in [
+            "outcome",
+            "latency_ms",
+            "wrong_event",
+            "wrong_at_ms",
+            "peak",
+        ] {
+            header.push(format!("{col}{}", suffix(d)));
+        }
+    }
+    header.extend(keys.iter().map(|k| k.to_string()));
+    let mut out = csv_row(&header);
+    for r in results {
+        let (k, bin) = match r.job {
+            Job::Single { k, .. } => (k, r.bin),
+            Job::FreeMotion { k } => (k, None),
+        };
+        let scenario = r.job.scenario();
+        let label = bin
+            .zip(scenario.binning())
+            .and_then(|(b, binning)| binning.labels().get(b.bin).cloned());
+        let mut row = vec![
+            scenario.name().to_string(),
+            k.to_string(),
+            r.seed.to_string(),
+            label.unwrap_or_default(),
+        ];
+        for d in 0..detectors {
+            let ms = |s: f64| format!("{:.2}", s * 1e3);
+            let (outcome, latency, event, at) = match r.outcomes.get(d) {
+                Some(Outcome::Correct { latency_s }) => {
+                    ("right", ms(*latency_s), "", String::new())
+                }
+                Some(Outcome::Repeated { latency_s, .. }) => {
+                    ("repeated", ms(*latency_s), "", String::new())
+                }
+                Some(Outcome::Wrong { event, t_s }) => {
+                    ("wrong", String::new(), event.as_str(), ms(*t_s))
+                }
+                Some(Outcome::Missed) => ("missed", String::new(), "", String::new()),
+                Some(Outcome::QuietAsExpected) => ("quiet", String::new(), "", String::new()),
+                None => ("", String::new(), "", String::new()),
+            };
+            let peak = r.peaks.get(d).map_or(String::new(), |p| format!("{p:.4}"));
+            row.extend([outcome.to_string(), latency, event.to_string(), at, peak]);
+        }
+        row.extend(keys.iter().map(|key| {
+            r.drawn
+                .iter()
+                .find(|(k, _)| k == key)
+                .map_or(String::new(), |(_, v)| v.clone())
+        }));
+        out += &csv_row(&row);
+    }
+    out
+}
+
+/// One CSV line: each field quoted where it holds a comma, a quote or a line break.
+fn csv_row(fields: &[String]) -> String {
+    let quoted: Vec<String> = fields
+        .iter()
+        .map(|f| {
+            if f.contains([',', '"', '\n', '\r']) {
+                format!("\"{}\"", f.replace('"', "\"\""))
+            } else {
+                f.clone()
+            }
+        })
+        .collect();
+    quoted.join(",") + "\n"
 }
 
 /// The longest time `--after-ms` and `--window-ms` take: a minute.

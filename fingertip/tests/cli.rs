@@ -228,6 +228,139 @@ fn evaluate_compares_configurations_on_the_same_runs() {
     );
 }
 
+/// One line of a CSV file's fields, a quoted field's doubled quotes read as one.
+fn csv_fields(line: &str) -> Vec<String> {
+    let (mut fields, mut field, mut quoted) = (Vec::new(), String::new(), false);
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                field.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(std::mem::take(&mut field)),
+            _ => field.push(c),
+        }
+    }
+    fields.push(field);
+    fields
+}
+
+/// `--runs-csv` writes one row per run, which tallies per scenario as the report does for
+/// each detector, and whose seed and drawn parameters are those `simulate` draws again.
+#[test]
+fn evaluate_writes_one_row_per_run() {
+    let tmp = scratch("runs-csv");
+    let dir = tmp.path();
+    let json = dir.join("report.json");
+    let table = dir.join("runs.csv");
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/../configs/");
+    let (approach, paper) = (format!("{root}approach.toml"), format!("{root}paper.toml"));
+    let out = fingertip(&[
+        "evaluate",
+        "--runs",
+        "3",
+        "--free-hours",
+        "0.005",
+        "--config",
+        &approach,
+        "--config",
+        &paper,
+        "--json",
+        json.to_str().expect("utf-8"),
+        "--runs-csv",
+        table.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    let written = std::fs::read_to_string(&table).expect("the table is written");
+    // Some bins' labels hold a comma (`link1, < 50 %`), quoted; no field holds a line break.
+    assert!(written.contains("\"link1, "), "quoted labels in {written}");
+    let mut lines = written.lines().map(csv_fields);
+    let header = lines.next().expect("a header");
+    let rows: Vec<Vec<String>> = lines.collect();
+    assert!(rows.iter().all(|r| r.len() == header.len()));
+    let col = |name: &str| {
+        header
+            .iter()
+            .position(|h| *h == name)
+            .unwrap_or_else(|| panic!("no column {name} in {header:?}"))
+    };
+    let singles = Scenario::single_event().len() * 3;
+    assert_eq!(
+        rows[..singles]
+            .iter()
+            .filter(|r| r[0] != "free_motion")
+            .count(),
+        singles
+    );
+    assert!(rows[singles..].iter().all(|r| r[0] == "free_motion"));
+    assert!(rows.len() > singles, "free-motion runs have rows too");
+    for d in 0..2 {
+        let suffix = format!("_{}", d + 1);
+        let (outcome, latency) = (
+            col(&format!("outcome{suffix}")),
+            col(&format!("latency_ms{suffix}")),
+        );
+        let tallied = &report["configs"][d];
+        for s in tallied["scenarios"].as_array().expect("scenarios") {
+            let name = s["name"].as_str().expect("name");
+            // A run where nothing is expected is right when quiet.
+            let count = |o: &[&str]| {
+                rows.iter()
+                    .filter(|r| r[0] == name && o.contains(&r[outcome].as_str()))
+                    .count() as u64
+            };
+            for (o, key) in [
+                (&["right", "quiet"][..], "correct"),
+                (&["wrong"], "wrong"),
+                (&["missed"], "missed"),
+                (&["repeated"], "repeated"),
+            ] {
+                assert_eq!(
+                    count(o),
+                    s[key].as_u64().expect(key),
+                    "{name} {key}, detector {d}"
+                );
+            }
+        }
+        let alarms = rows[singles..]
+            .iter()
+            .filter(|r| r[outcome] == "wrong")
+            .count() as u64;
+        assert_eq!(
+            alarms,
+            tallied["false_alarms"].as_u64().expect("false alarms")
+        );
+        for r in &rows {
+            let timed = matches!(r[outcome].as_str(), "right" | "repeated");
+            assert_eq!(r[latency].parse::<f64>().is_ok(), timed, "{r:?}");
+        }
+    }
+    // A row's seed simulates the run it describes: the same parameters are drawn again.
+    let param = col("param.plant.control_bandwidth");
+    let row = &rows[singles - 1];
+    let trace = dir.join("again.csv");
+    let sim = fingertip(&[
+        "simulate",
+        &row[0],
+        "--randomize",
+        "--seed",
+        &row[col("seed")],
+        "--out",
+        trace.to_str().expect("utf-8"),
+    ]);
+    assert!(sim.status.success(), "{}", text(&sim.stderr));
+    let again = std::fs::read_to_string(&trace).expect("trace");
+    let line = format!("# param.plant.control_bandwidth: {}", row[param]);
+    assert!(
+        again.lines().any(|l| l == line),
+        "{line} not in the simulated run"
+    );
+}
+
 /// `identify` finds, in simulated free motion, the fingertip's inertia on the force sensor:
 /// a gain of about minus its mass (20-45 g plus the skin) in the approach configuration's
 /// units (cN per m/s^2, i.e. tens of grams), printed as a `cancel` stage ready to paste; a
