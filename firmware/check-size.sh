@@ -37,7 +37,7 @@ cargo fw-clippy --color never -- -D warnings
 cargo fw-clippy --color never --features classic-can -- -D warnings
 
 target_dir=$(cargo metadata --format-version 1 --no-deps | sed -n 's/.*"target_directory":"\([^"]*\)".*/\1/p')
-elf="$target_dir/thumbv7em-none-eabihf/release/fingertip-firmware"
+elf="$target_dir/thumbv7em-none-eabihf/firmware/fingertip-firmware"
 sizes=$("$tools/llvm-size" -A "$elf")
 section() { echo "$sizes" | awk -v s="$1" '$1 == s { print $2; f = 1 } END { if (!f) print 0 }'; }
 flash=$(( $(section .vector_table) + $(section .text) + $(section .rodata) + $(section .data) ))

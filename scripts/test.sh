@@ -37,7 +37,7 @@ cargo clippy --all-targets -- -D warnings
 cargo clippy -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
 
 step "docs build without warnings"
-RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p detector-build -p fingertip-can -p fingertip -p host-tests -p firmware --quiet
+RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p detector-build -p fingertip-can -p fingertip -p host-tests -p firmware -p fingertip-tick --quiet
 
 step "tests (host; the emulated Cortex-M4; cantools)"
 export FINGERTIP_REQUIRE_PYTHON=1 FINGERTIP_REQUIRE_QEMU=1

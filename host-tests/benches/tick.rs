@@ -1,5 +1,5 @@
 //! Host nanoseconds per detector tick for the approach configuration: the fixed-point core's
-//! tick generated for it at build time (the firmware's, `fingertip_qemu::generated`) and its
+//! tick generated for it at build time (the firmware's, `fingertip_tick::ApproachTick`) and its
 //! interpreter `Detector::tick_into`, over the simulator's golden runs that the QEMU test replays too (the 13
 //! Table 1 runs and one second of event-free motion, nominal parameters, seed 0, a fresh
 //! state per run).
@@ -9,8 +9,9 @@
 //! tick (`host_tests::reference::Model::tick`, fed the same samples unquantized), and their
 //! ratios to the generated tick.
 //!
-//! Note the profiles: `cargo bench` builds detector-core with the workspace's release
-//! settings (opt-level "s", the firmware's), host-tests itself at opt-level 3.
+//! Note the profiles: `cargo bench` builds detector-core and the tick crate with the
+//! workspace's release settings (opt-level "s"; the chip's build compiles the tick at 3 and
+//! the core at "z"), host-tests itself at opt-level 3.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -19,7 +20,7 @@ use detector_build::Config;
 use detector_core::{Detector, DetectorTick, Inputs, Output, Tick};
 use fingertip::replay::channel_columns;
 use fingertip::sim::golden_runs;
-use fingertip_qemu::generated;
+use fingertip_qemu::ApproachTick;
 use host_tests::reference::Model;
 
 /// Timed passes over the trace per model, after one warm-up pass.
@@ -94,7 +95,7 @@ fn models<'a>(detector: &'a Detector, model: &'a Model) -> Vec<Timed<'a>> {
     let compiled = fixed(
         "fixed point, generated (the firmware's)",
         detector,
-        &generated::ApproachTick,
+        &ApproachTick,
     );
     let interpreted = fixed("fixed point, interpreted (Detector)", detector, detector);
     let reference: Timed = (

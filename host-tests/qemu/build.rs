@@ -1,13 +1,10 @@
 //! Prepares what the QEMU program embeds, on the PC:
 //!
-//! - `approach.image` and `approach_tick.rs`: the detector image of `configs/approach.toml`,
-//!   or of the configuration named by `FINGERTIP_QEMU_CONFIG` (relative to the workspace
-//!   root), which the target loads in place, as the firmware does, and the tick generated
-//!   from it (`ApproachTick`), the firmware's way of running it, both by
-//!   `detector_build::Generator`;
 //! - `trace.ftrc`: the inputs to replay, in the format of `src/trace.rs`: the file named by
 //!   `FINGERTIP_QEMU_TRACE` if set (the host test writes the simulator's golden runs there),
-//!   else a deterministic synthetic trace generated here;
+//!   else a deterministic synthetic trace generated here for the detector `fingertip-tick`
+//!   was generated from (`configs/approach.toml`, or the file `FINGERTIP_CONFIG` names;
+//!   the crate's `links` metadata says which);
 //! - for the target only, the linker script `mps2-an386.x` (QEMU's Cortex-M4 board, for
 //!   cortex-m-rt's runtime), by absolute path.
 
@@ -17,7 +14,7 @@ use std::f64::consts::PI;
 use std::fs;
 use std::path::{Path, PathBuf};
 
-use detector_build::{Config, Generator};
+use detector_build::Config;
 use detector_core::Detector;
 
 #[allow(dead_code)]
@@ -34,17 +31,13 @@ fn main() -> Result<()> {
         link_script(&manifest);
     }
 
-    // Another configuration's cost on the chip: FINGERTIP_QEMU_CONFIG (relative to the
-    // workspace root); the host test always builds the default's.
-    println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_CONFIG");
-    let config_rel =
-        env::var("FINGERTIP_QEMU_CONFIG").unwrap_or_else(|_| "configs/approach.toml".into());
-    let generated = Generator::new(manifest.join("../..").join(&config_rel))
-        .tick_type("ApproachTick")
-        .file_stem("approach")
-        .generate(&out)?;
-    let config = generated.config;
-    println!("cargo:rustc-env=FINGERTIP_QEMU_CONFIG_SOURCE={config_rel}");
+    // The detector the firmware's tick crate was generated from (another configuration's
+    // cost on the chip: FINGERTIP_CONFIG; the host test always builds the default's).
+    let config_path = env::var("DEP_FINGERTIP_TICK_CONFIG")
+        .map_err(|_| "fingertip-tick did not report its configuration")?;
+    println!("cargo:rerun-if-env-changed=FINGERTIP_CONFIG");
+    println!("cargo:rerun-if-changed={config_path}");
+    let config = detector_build::load(Path::new(&config_path))?;
 
     println!("cargo:rerun-if-env-changed=FINGERTIP_QEMU_TRACE");
     let (trace, source) = match env::var_os("FINGERTIP_QEMU_TRACE") {

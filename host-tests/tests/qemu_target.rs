@@ -10,9 +10,10 @@
 //! `fingertip_qemu::trace`), which the program embeds.
 //!
 //! The test builds the `fingertip-qemu` program (`host-tests/qemu`) for
-//! `thumbv7em-none-eabihf` with the workspace's release profile (the firmware's: opt-level
-//! "s", fat LTO) by running `cargo build -p fingertip-qemu --release --target
-//! thumbv7em-none-eabihf` itself, with `FINGERTIP_QEMU_TRACE` pointing at that file (same
+//! `thumbv7em-none-eabihf` with the firmware's profile (`firmware` in the workspace's
+//! `Cargo.toml`: fat LTO, opt-level "z", the generated tick's crate `fingertip-tick` at 3,
+//! the target's flags of `.cargo/config.toml`) by running `cargo build -p fingertip-qemu
+//! --profile firmware --target thumbv7em-none-eabihf` itself, with `FINGERTIP_QEMU_TRACE` pointing at that file (same
 //! target directory as the outer `cargo test`), runs it on QEMU's `mps2-an386` with
 //! `-icount shift=10,align=off,sleep=off`, and checks that
 //!
@@ -52,6 +53,8 @@ const AIM: u32 = 800;
 const ICOUNT_SHIFT: u32 = 10;
 const TARGET: &str = "thumbv7em-none-eabihf";
 const PACKAGE: &str = "fingertip-qemu";
+/// The firmware's build profile (`Cargo.toml`): opt-level "z", the tick crate at 3.
+const PROFILE: &str = "firmware";
 /// The program's `#[no_mangle] #[inline(never)]` tick and stage functions.
 const ROOTS: [&str; 6] = [
     "fingertip_tick",
@@ -210,7 +213,8 @@ fn build_program(trace: &Path) -> Result<PathBuf, String> {
             "build",
             "-p",
             PACKAGE,
-            "--release",
+            "--profile",
+            PROFILE,
             "--target",
             TARGET,
             "--message-format=json-render-diagnostics",
@@ -220,7 +224,7 @@ fn build_program(trace: &Path) -> Result<PathBuf, String> {
         .map_err(|e| format!("running cargo: {e}"))?;
     if !out.status.success() {
         return Err(format!(
-            "cargo build -p {PACKAGE} --release --target {TARGET} failed:\n{}",
+            "cargo build -p {PACKAGE} --profile {PROFILE} --target {TARGET} failed:\n{}",
             String::from_utf8_lossy(&out.stderr)
         ));
     }
@@ -696,7 +700,7 @@ fn check_tick_path(funcs: &BTreeMap<String, Function>, roots: &[&str]) -> Result
 #[test]
 fn generated_tick_matches_the_interpreter() {
     use detector_core::{DetectorTick, Output};
-    use fingertip_qemu::generated::ApproachTick;
+    use fingertip_qemu::ApproachTick;
     let bytes = golden_trace().expect("the golden trace");
     let trace = Trace::parse(&bytes).expect("parses");
     let detector = fingertip_qemu::detector().expect("the embedded configuration");
@@ -747,7 +751,7 @@ fn qemu_digest_matches_the_host() {
         report.header
     );
     assert_eq!(
-        detector_core::DetectorTick::image_crc(&fingertip_qemu::generated::ApproachTick),
+        detector_core::DetectorTick::image_crc(&fingertip_qemu::ApproachTick),
         Some(crc),
         "the generated tick was generated from another image"
     );

@@ -4,23 +4,15 @@
 #![warn(missing_docs)]
 
 pub mod digest;
-/// The approach detector's tick generated at build time (`ApproachTick`): bit for bit the
-/// interpreter's, for the detector [`detector`] loads.
-#[allow(missing_docs, clippy::all)]
-pub mod generated {
-    include!(concat!(env!("OUT_DIR"), "/approach_tick.rs"));
-}
 pub mod replay;
 pub mod trace;
 
 use detector_core::{Detector, ImageError};
 
-/// The image of the approach detector (`configs/approach.toml`, compiled on the PC by
-/// `build.rs`), which the program loads in place as the firmware does.
-pub static IMAGE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/approach.image"));
-
-/// The configuration file the build read, relative to the workspace root.
-pub const CONFIG_SOURCE: &str = env!("FINGERTIP_QEMU_CONFIG_SOURCE");
+/// The detector the firmware runs, from its tick crate: its image, which the program loads
+/// in place as the firmware does, the tick generated for it (`ApproachTick`, compiled as
+/// the firmware compiles it), and the configuration file it came from.
+pub use fingertip_tick::{ApproachTick, CONFIG_SOURCE, IMAGE};
 
 /// The trace the program replays, in the [`trace`] format.
 pub static TRACE: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/trace.ftrc"));

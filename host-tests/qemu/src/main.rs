@@ -35,10 +35,9 @@ mod target {
     use cortex_m_semihosting::{debug, hprintln};
     use detector_core::{ChannelMask, Detector, DetectorTick, Inputs, Output, State, Tick};
     use fingertip_qemu::digest::{Crc32, Digest};
-    use fingertip_qemu::generated::ApproachTick;
     use fingertip_qemu::replay::{Position, SegmentLine, SegmentReport, replay};
     use fingertip_qemu::trace::Trace;
-    use fingertip_qemu::{CONFIG_SOURCE, IMAGE, TRACE, TRACE_SOURCE};
+    use fingertip_qemu::{ApproachTick, CONFIG_SOURCE, IMAGE, TRACE, TRACE_SOURCE};
 
     /// One whole tick as the firmware runs it: the tick generated for the configuration.
     /// A root of the forbidden-helper check.
