@@ -95,12 +95,12 @@ enum Command {
             requires = "randomize"
         )]
         ranges: Vec<sim::ParamRange>,
-        /// For a link collision: the obstacle gives way this long after the link first
-        /// touches it (ms, 0 to 1,000), and the run becomes a blow of the collision's own
-        /// force, read the same bit for bit until then (its labels stay the collision's;
-        /// `--example twins`).
+        /// For a link collision or a contact: the obstacle or the object gives way this
+        /// long after the first touch (ms, 0 to 1,000), and the run becomes a blow of the
+        /// event's own force on the link or the pad, read the same bit for bit until then
+        /// (its labels stay the event's; `--example twins`).
         #[arg(long)]
-        obstacle_gives_way_ms: Option<f64>,
+        gives_way_ms: Option<f64>,
         /// Output file; standard output when absent.
         #[arg(long)]
         out: Option<PathBuf>,
@@ -481,7 +481,7 @@ fn run(cli: Cli) -> Result<()> {
             velocity_filter_hz,
             context_turned_deg,
             ranges,
-            obstacle_gives_way_ms,
+            gives_way_ms,
             out,
         } => simulate(
             &scenario,
@@ -496,7 +496,7 @@ fn run(cli: Cli) -> Result<()> {
                 velocity_filter_hz,
                 context_turned_deg,
                 ranges,
-                obstacle_gives_way_s: obstacle_gives_way_ms.map(|ms| ms / 1000.0),
+                gives_way_s: gives_way_ms.map(|ms| ms / 1000.0),
                 ..SimOptions::default()
             },
             out.as_deref(),

@@ -1690,38 +1690,34 @@ fn a_flight_recording_replays_from_its_saved_state() {
     );
 }
 
-/// `simulate --obstacle-gives-way-ms` writes a link collision's twin (a blow of the
-/// collision's own force that reads as the collision until it lets go), says so in the
-/// trace, and refuses a time outside 0 to 1,000 ms naming the option, writing nothing.
+/// `simulate --gives-way-ms` writes a link collision's twin (a blow of the collision's own
+/// force that reads as the collision until it lets go) or a contact's (a blow on the pad),
+/// says so in the trace, and refuses a time outside 0 to 1,000 ms naming the option,
+/// writing nothing.
 #[test]
-fn simulate_writes_a_collisions_twin() {
+fn simulate_writes_an_events_twin() {
     let tmp = scratch("twin");
     let dir = tmp.path();
     let trace = dir.join("twin.csv");
     let path = trace.to_str().expect("utf-8");
-    let ok = fingertip(&[
-        "simulate",
-        "link_collision_8",
-        "--obstacle-gives-way-ms",
-        "2",
-        "--out",
-        path,
-    ]);
-    assert!(ok.status.success(), "{}", text(&ok.stderr));
-    let written = std::fs::read_to_string(&trace).expect("trace");
-    assert!(written.contains("# obstacle_gives_way_s: 0.002\n"));
-    assert!(written.contains("# obstacle_peak_force_n: "));
-    std::fs::remove_file(&trace).expect("removed");
-    let bad = fingertip(&[
-        "simulate",
-        "link_collision_8",
-        "--obstacle-gives-way-ms=2000",
-        "--out",
-        path,
-    ]);
+    let twin = |scenario: &str, ms: &str| {
+        fingertip(&["simulate", scenario, "--gives-way-ms", ms, "--out", path])
+    };
+    for (scenario, ms, meta) in [
+        ("link_collision_8", "2", "# gives_way_s: 0.002\n"),
+        ("contact_hard_5", "1", "# gives_way_s: 0.001\n"),
+    ] {
+        let ok = twin(scenario, ms);
+        assert!(ok.status.success(), "{scenario}: {}", text(&ok.stderr));
+        let written = std::fs::read_to_string(&trace).expect("trace");
+        assert!(written.contains(meta), "{scenario}");
+        assert!(written.contains("# gives_way_peak_force_n: "), "{scenario}");
+        std::fs::remove_file(&trace).expect("removed");
+    }
+    let bad = twin("link_collision_8", "2000");
     assert!(!bad.status.success());
     assert!(
-        text(&bad.stderr).contains("obstacle_gives_way_s"),
+        text(&bad.stderr).contains("gives_way_s"),
         "{}",
         text(&bad.stderr)
     );

@@ -313,9 +313,9 @@ pub(crate) struct Setup {
     /// The corner of the low-pass through which the joint loops take their velocity from
     /// the encoders' difference (Hz); 0: they read the true velocity.
     pub velocity_filter_hz: f64,
-    /// How long after the struck body first touches it the obstacle gives way (s): from
-    /// then on it pushes no more.
-    pub obstacle_gives_way_s: Option<f64>,
+    /// How long after the first touch the obstacle (a link collision's) or the object (a
+    /// contact's) gives way (s): from then on it pushes no more.
+    pub gives_way_s: Option<f64>,
 }
 
 /// What the physical event was.
@@ -331,8 +331,8 @@ pub(crate) struct Output {
     pub channels: Vec<Vec<f64>>,
     /// The first integration step at which an event force was non-zero.
     pub onset: Option<(u64, Happened)>,
-    /// The largest force the obstacle pushed with (N; 0 without one).
-    pub obstacle_peak: f64,
+    /// The largest force the obstacle or the object pushed with (N; 0 without either).
+    pub peak_force: f64,
 }
 
 /// The stiffest mode of a run's mechanics (rad/s) and the internal rate (Hz) it needs:
@@ -936,18 +936,43 @@ struct Obstacle<'a> {
     setup: &'a ObstacleSetup,
     /// Its position in the struck body's coordinates.
     position: f64,
-    /// For an obstacle that gives way: how long after the first touch (s), and when that
-    /// touch was, once it has happened.
-    gives_way: Option<(f64, Option<f64>)>,
+    gives_way: Option<GivesWay>,
+}
+
+/// An obstacle or an object that gives way: how long after the first touch (s), and when
+/// that touch was, once it has happened.
+struct GivesWay {
+    after: f64,
+    touch: Option<f64>,
+}
+
+impl GivesWay {
+    fn new(after: Option<f64>) -> Option<GivesWay> {
+        after.map(|after| GivesWay { after, touch: None })
+    }
+
+    /// It has given way by time `t`.
+    fn gone(this: &Option<GivesWay>, t: f64) -> bool {
+        this.as_ref()
+            .is_some_and(|g| g.touch.is_some_and(|touch| t >= touch + g.after))
+    }
+
+    /// Notes the first touch: the first step that pushes.
+    fn pushed(this: &mut Option<GivesWay>, t: f64, force: f64) {
+        if let Some(g) = this
+            && g.touch.is_none()
+            && force > 0.0
+        {
+            g.touch = Some(t);
+        }
+    }
 }
 
 impl Obstacle<'_> {
     /// The force pushing the struck body back along the wall's normal at time `t`, from
     /// its position and velocity (called once per step, in order).
     fn force(&mut self, b: &Bodies, t: f64) -> f64 {
-        if let Some((after, Some(touch))) = self.gives_way
-            && t >= touch + after
-        {
+        if GivesWay::gone(&self.gives_way, t) {
             return 0.0;
         }
         let n = self.setup.normal;
@@ -961,11 +986,7 @@ impl Obstacle<'_> {
             x - self.position,
             v,
         );
-        if let Some((_, touch @ None)) = &mut self.gives_way
-            && f > 0.0
-        {
-            *touch = Some(t);
-        }
+        GivesWay::pushed(&mut self.gives_way, t, f);
         f
     }
 }
@@ -996,6 +1017,7 @@ struct Contact<'a> {
     last_depth: f64,
     /// The contact's elastic stiffness, less the relaxing part, or Hertz's K.
     stiffness: f64,
+    gives_way: Option<GivesWay>,
 }
 
 /// What the contact does to the skin in one step.
@@ -1007,7 +1029,7 @@ struct ContactForces {
 }
 
 impl Contact<'_> {
-    fn new(setup: &ObjectSetup, skin: [f64; 2], dt: f64) -> Contact<'_> {
+    fn new(setup: &ObjectSetup, skin: [f64; 2], dt: f64, gives_way: Option<f64>) -> Contact<'_> {
         let (s, c) = setup.tilt.sin_cos();
         let n = [c, s];
         let (stiffness, relaxing_stiffness, decay) = match (setup.law, setup.relaxation) {
@@ -1035,14 +1057,29 @@ impl Contact<'_> {
             decay,
             last_depth: 0.0,
             stiffness,
+            gives_way: GivesWay::new(gives_way),
         }
     }
 
-    /// The contact's forces on the skin this step. `free` is the skin's velocity at the
+    /// The contact's forces on the skin at time `t`. `free` is the skin's velocity at the
     /// end of the step without the normal force (the other forces applied), `gain` the
     /// integration step over the skin's mass: the damping acts on the velocity the step
     /// ends with, so that it stays stable however stiff the contact.
-    fn forces(&mut self, b: &Bodies, free: [f64; 2], gain: f64, p: &Plant) -> ContactForces {
+    fn forces(
+        &mut self,
+        b: &Bodies,
+        free: [f64; 2],
+        gain: f64,
+        p: &Plant,
+        t: f64,
+    ) -> ContactForces {
+        if GivesWay::gone(&self.gives_way, t) {
+            self.in_contact = false;
+            return ContactForces {
+                normal: 0.0,
+                friction: 0.0,
+            };
+        }
         let n = self.n;
         let depth = n[0] * b.xs[0] + n[1] * b.xs[1] - (self.surface + self.position);
         let reached = depth.max(0.0);
@@ -1067,6 +1104,7 @@ impl Contact<'_> {
         let rate_free = n[0] * free[0] + n[1] * free[1] - self.velocity;
         let rate = (rate_free - gain * elastic) / (1.0 + g);
         let normal = (elastic + b_n * rate).max(0.0);
+        GivesWay::pushed(&mut self.gives_way, t, normal);
         let tangential = self.t[0] * b.xs[0] + self.t[1] * b.xs[1];
         if !self.in_contact {
             self.anchor = tangential;
@@ -1343,11 +1381,14 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     context.received = context
         .message(0, &mut setup.trajectory, &b)
         .map(round_context);
-    let mut contact = setup.object.as_ref().map(|o| Contact::new(o, b.xs, dt));
+    let mut contact = setup
+        .object
+        .as_ref()
+        .map(|o| Contact::new(o, b.xs, dt, setup.gives_way_s));
     let mut obstacle = setup.obstacle.as_ref().map(|o| Obstacle {
         setup: o,
         position: o.position + dot(o.normal, start),
-        gives_way: setup.obstacle_gives_way_s.map(|after| (after, None)),
+        gives_way: GivesWay::new(setup.gives_way_s),
     });
     let mut disturbance = setup.disturbance.as_ref().map(|d| Disturbance::new(d, dt));
     let (inv_ma, inv_md, ms) = (chain.arm_inv_mass, 1.0 / chain.distal_mass, chain.skin_mass);
@@ -1355,7 +1396,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let carrier = p.carrier_mass;
 
     let mut onset: Option<(u64, Happened)> = None;
-    let mut obstacle_peak = 0.0f64;
+    let mut peak_force = 0.0f64;
     let mut out: Vec<Vec<f64>> = (0..CHANNELS.len())
         .map(|_| Vec::with_capacity(setup.rows))
         .collect();
@@ -1418,13 +1459,13 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let (f_n, f_t, n, tn) = match contact.as_mut() {
             Some(c) => {
                 let free: [f64; 2] = std::array::from_fn(|k| b.vs[k] + dt * foam[k] / ms);
-                let f = c.forces(&b, free, dt / ms, p);
+                let f = c.forces(&b, free, dt / ms, p, t);
                 (f.normal, f.friction, c.n, c.t)
             }
             None => (0.0, 0.0, [1.0, 0.0], [0.0, 1.0]),
         };
         let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) * inv_ms);
-        obstacle_peak = obstacle_peak.max(f_ob);
+        peak_force = peak_force.max(f_ob).max(f_n);
         if onset.is_none() {
             onset = event(f_n, f_ob, f_d).map(|h| (i, h));
         }
@@ -1460,7 +1501,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     Output {
         channels: out,
         onset,
-        obstacle_peak,
+        peak_force,
     }
 }
 
@@ -1509,9 +1550,9 @@ mod tests {
         let k = 50_000.0;
         let hertz = object(ContactLaw::Hertz { stiffness: k }, 0.0, None);
         let force = |setup: &ObjectSetup, depth: f64| {
-            let mut c = Contact::new(setup, [0.0; 2], 1e-5);
+            let mut c = Contact::new(setup, [0.0; 2], 1e-5, None);
             let b = skin_at([depth, 0.0], [0.0; 2]);
-            c.forces(&b, [0.0; 2], 0.0, &p).normal
+            c.forces(&b, [0.0; 2], 0.0, &p, 0.0).normal
         };
         assert!((force(&hertz, 1.0 / k) - 1.0).abs() < 1e-9);
         let ratio = force(&hertz, 4.0 / k) / force(&hertz, 1.0 / k);
@@ -1536,12 +1577,12 @@ mod tests {
             0.0,
             Some((share, tau)),
         );
-        let mut c = Contact::new(&setup, [0.0; 2], dt);
+        let mut c = Contact::new(&setup, [0.0; 2], dt, None);
         let b = skin_at([1e-3, 0.0], [0.0; 2]);
         let mut at = |steps: usize| {
             let mut f = 0.0;
             for _ in 0..steps {
-                f = c.forces(&b, [0.0; 2], 0.0, &p).normal;
+                f = c.forces(&b, [0.0; 2], 0.0, &p, 0.0).normal;
             }
             f
         };
@@ -1563,17 +1604,17 @@ mod tests {
         let p = Plant::nominal();
         let tilt = 0.2;
         let setup = object(ContactLaw::Linear { stiffness: 1000.0 }, tilt, None);
-        let mut c = Contact::new(&setup, [0.0; 2], 1e-5);
+        let mut c = Contact::new(&setup, [0.0; 2], 1e-5, None);
         // 1 mm into the surface along its normal.
         let n = [tilt.cos(), tilt.sin()];
         let b = skin_at([1e-3 * n[0], 1e-3 * n[1]], [0.0; 2]);
-        let f = c.forces(&b, [0.0; 2], 0.0, &p);
+        let f = c.forces(&b, [0.0; 2], 0.0, &p, 0.0);
         assert!((f.normal - 1.0).abs() < 1e-9, "{}", f.normal);
         assert_eq!(f.friction, 0.0, "stuck where it touched");
         // Slid far along the tangent: friction at its limit, against the slide.
         let t = [-tilt.sin(), tilt.cos()];
         let slid = skin_at([b.xs[0] + 0.01 * t[0], b.xs[1] + 0.01 * t[1]], [0.0; 2]);
-        let f = c.forces(&slid, [0.0; 2], 0.0, &p);
+        let f = c.forces(&slid, [0.0; 2], 0.0, &p, 0.0);
         assert!(
             (f.friction + p.skin_friction * f.normal).abs() < 1e-9,
             "{}",
@@ -1590,7 +1631,7 @@ mod tests {
         let mut setup = object(ContactLaw::Linear { stiffness: 3000.0 }, 0.0, None);
         setup.damping = 80.0;
         let (dt, m) = (1e-4, 0.002);
-        let mut c = Contact::new(&setup, [0.0; 2], dt);
+        let mut c = Contact::new(&setup, [0.0; 2], dt, None);
         // Pressed by 10 N: elastic force 10 N at 3.3 mm, damping 80 x 10 = 800 N s/m.
         let push = 10.0;
         let (mut x, mut v) = (0.0, 0.05);
@@ -1598,7 +1639,7 @@ mod tests {
         for _ in 0..2000 {
             let b = skin_at([x, 0.0], [v, 0.0]);
             let free = [v + dt * push / m, 0.0];
-            let f = c.forces(&b, free, dt / m, &p).normal;
+            let f = c.forces(&b, free, dt / m, &p, 0.0).normal;
             assert!(f >= 0.0);
             v += dt * (push - f) / m;
             x += v * dt;
@@ -1834,7 +1875,7 @@ mod tests {
             encoder_resolution: ENCODER_RESOLUTION,
             film_highpass_hz: 0.0,
             velocity_filter_hz: 0.0,
-            obstacle_gives_way_s: None,
+            gives_way_s: None,
         };
         let mut noise = rand::rngs::Xoshiro256PlusPlus::seed_from_u64(3);
         let out = run(&mut setup, &mut noise);

@@ -729,15 +729,16 @@ pub struct SimOptions {
     /// or object's range, or beyond the envelope. Each is recorded in the trace as
     /// `range.GROUP.NAME`; a non-randomized run refuses them.
     pub ranges: Vec<ParamRange>,
-    /// For a link collision: the obstacle gives way this long after the link first
-    /// touches it (s, 0 to 1), and pushes no more, as a light object knocked aside or a
-    /// hand that lets go would. The run is then the collision's twin: the same readings,
-    /// bit for bit, until it gives way, and a finger set free after a blow of that length
-    /// from then on. It tells how soon any detector can tell a collision from a blow (the
-    /// `twins` example). The trace records it and the largest force the obstacle pushed
-    /// with (`obstacle_gives_way_s`, `obstacle_peak_force_n`), and keeps the collision's
+    /// For a link collision or a contact: the obstacle or the object gives way this long
+    /// after the link or the skin first touches it (s, 0 to 1), and pushes no more, as a
+    /// light object knocked aside or a hand that lets go would. The run is then the event's
+    /// twin: the same readings, bit for bit, until it gives way, and a finger set free
+    /// after a blow of that length (on the link, or on the pad) from then on. It tells how
+    /// soon any detector can tell a collision or a contact from a blow (the `twins`
+    /// example). The trace records it and the largest force the obstacle or the object
+    /// pushed with (`gives_way_s`, `gives_way_peak_force_n`), and keeps the event's
     /// labels.
-    pub obstacle_gives_way_s: Option<f64>,
+    pub gives_way_s: Option<f64>,
 }
 
 impl SimOptions {
@@ -766,7 +767,7 @@ impl Default for SimOptions {
             velocity_filter_hz: 0.0,
             context_turned_deg: 0.0,
             ranges: Vec::new(),
-            obstacle_gives_way_s: None,
+            gives_way_s: None,
         }
     }
 }
@@ -908,8 +909,8 @@ fn check_options(opts: &SimOptions) -> Result<(), SimError> {
         MAX_CONTEXT_TURNED_DEG,
         "-90 to 90 degrees",
     )?;
-    if let Some(after) = opts.obstacle_gives_way_s {
-        check("obstacle_gives_way_s", after, 0.0, 1.0, "0 to 1 s")?;
+    if let Some(after) = opts.gives_way_s {
+        check("gives_way_s", after, 0.0, 1.0, "0 to 1 s")?;
     }
     if let Some(r) = opts.ranges.first().filter(|_| !opts.randomize) {
         return Err(SimError::BadRange(format!(
@@ -996,8 +997,8 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         fmt_f64(stiffest / std::f64::consts::TAU),
     ));
     let gives_way = opts
-        .obstacle_gives_way_s
-        .filter(|_| scene.obstacle.is_some());
+        .gives_way_s
+        .filter(|_| scene.obstacle.is_some() || scene.object.is_some());
     let mut setup = Setup {
         plant,
         sensors,
@@ -1012,7 +1013,7 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
         encoder_resolution: opts.encoder_resolution_um / 1e6,
         film_highpass_hz: opts.film_highpass_hz,
         velocity_filter_hz: opts.velocity_filter_hz,
-        obstacle_gives_way_s: gives_way,
+        gives_way_s: gives_way,
     };
     let mut out = engine::run(&mut setup, &mut noise);
     for column in &mut out.channels {
@@ -1020,8 +1021,8 @@ pub fn simulate(scenario: &Scenario, opts: &SimOptions) -> Result<Trace, SimErro
     }
     turn_context(&mut out.channels, opts.context_turned_deg);
     if let Some(after) = gives_way {
-        meta.push(("obstacle_gives_way_s".into(), fmt_f64(after)));
-        meta.push(("obstacle_peak_force_n".into(), fmt_f64(out.obstacle_peak)));
+        meta.push(("gives_way_s".into(), fmt_f64(after)));
+        meta.push(("gives_way_peak_force_n".into(), fmt_f64(out.peak_force)));
     }
 
     let t: Vec<f64> = (warm_rows..rows).map(|k| k as f64 / opts.rate_hz).collect();
