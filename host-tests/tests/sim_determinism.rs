@@ -72,9 +72,9 @@ fn equal_seeds_of_different_scenarios_are_independent() {
 
 #[test]
 fn scenario_names_and_expected_events() {
-    assert_eq!(Scenario::all().len(), 19);
+    assert_eq!(Scenario::all().len(), 20);
     assert_eq!(Scenario::table1().len(), 13);
-    assert_eq!(Scenario::single_event().len(), 18);
+    assert_eq!(Scenario::single_event().len(), 19);
     assert!(!Scenario::single_event().contains(&Scenario::FreeMotion));
     let expected = [
         ("contact_hard_8", Some("contact")),
@@ -95,6 +95,7 @@ fn scenario_names_and_expected_events() {
         ("disturbance_slow_2", Some("disturbance")),
         ("knock_link1", Some("disturbance")),
         ("knock_link2", Some("disturbance")),
+        ("knock_pad", Some("disturbance")),
         ("free_motion", None),
     ];
     for (s, (name, event)) in Scenario::all().iter().zip(expected) {

@@ -240,6 +240,10 @@ pub(crate) enum Struck {
     Link2,
     /// The fingertip's housing (the carrier), above the force sensor.
     Tip,
+    /// The pad: the skin over the film, struck from in front. A blow there can only press
+    /// it (a burst's pulling half pushes nothing), and the film reads it as it reads an
+    /// object's push.
+    Pad,
 }
 
 impl Struck {
@@ -249,6 +253,7 @@ impl Struck {
             Struck::Link1 => "link1",
             Struck::Link2 => "link2",
             Struck::Tip => "tip",
+            Struck::Pad => "pad",
         }
     }
 }
@@ -1413,13 +1418,21 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let mut on_arm = [0.0; 2];
         let mut on_distal = [0.0; 2];
         let mut on_tip = [0.0; 2];
+        let mut on_pad = [0.0; 2];
         let f_d = match disturbance.as_mut() {
             Some(d) => {
-                let f = d.force(t);
+                let mut f = d.force(t);
                 match d.body {
                     Struck::Link1 => on_arm = f,
                     Struck::Link2 => on_distal = f,
                     Struck::Tip => on_tip = f,
+                    // The pad faces +x: a push along +x would pull it.
+                    Struck::Pad => {
+                        if f[0] > 0.0 {
+                            f = [0.0; 2];
+                        }
+                        on_pad = f;
+                    }
                 }
                 f
             }
@@ -1464,7 +1477,8 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
             }
             None => (0.0, 0.0, [1.0, 0.0], [0.0, 1.0]),
         };
-        let a_s: [f64; 2] = std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k]) * inv_ms);
+        let a_s: [f64; 2] =
+            std::array::from_fn(|k| (foam[k] - f_n * n[k] + f_t * tn[k] + on_pad[k]) * inv_ms);
         peak_force = peak_force.max(f_ob).max(f_n);
         if onset.is_none() {
             onset = event(f_n, f_ob, f_d).map(|h| (i, h));
@@ -1473,7 +1487,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         let physical = Physical {
             load: std::array::from_fn(|k| -carrier * a_d[k] - foam[k] + on_tip[k]),
             skin: a_s,
-            pressing: f_n * n[0] - f_t * tn[0],
+            pressing: f_n * n[0] - f_t * tn[0] - on_pad[0],
             foam: foam[0],
         };
         let analog = sensors.transduce(&physical);

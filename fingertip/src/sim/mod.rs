@@ -243,6 +243,8 @@ pub enum Scenario {
     KnockLink1,
     /// A knock on link 2, the distal link, while moving at 5 cm/s.
     KnockLink2,
+    /// A knock on the pad, pressing it from in front, while moving at 5 cm/s.
+    KnockPad,
     /// Random event-free motion (pauses, moves, gentle velocity changes, sudden
     /// accelerations), no contact.
     FreeMotion,
@@ -279,9 +281,9 @@ enum Size {
 }
 
 impl Scenario {
-    /// Every scenario: the 13 Table 1 runs, the 5 runs that widen the envelope beyond
+    /// Every scenario: the 13 Table 1 runs, the 6 runs that widen the envelope beyond
     /// them, then free motion.
-    pub const ALL: [Scenario; 19] = [
+    pub const ALL: [Scenario; 20] = [
         Scenario::ContactHard8,
         Scenario::ContactHard5,
         Scenario::ContactHard2,
@@ -300,10 +302,11 @@ impl Scenario {
         Scenario::DisturbanceSlow2,
         Scenario::KnockLink1,
         Scenario::KnockLink2,
+        Scenario::KnockPad,
         Scenario::FreeMotion,
     ];
 
-    /// Every scenario: the 13 Table 1 runs, the 5 beyond them, then free motion.
+    /// Every scenario: the 13 Table 1 runs, the 6 beyond them, then free motion.
     pub fn all() -> &'static [Scenario] {
         &Scenario::ALL
     }
@@ -316,7 +319,7 @@ impl Scenario {
     /// Every scenario with one event (or one sudden acceleration) per run: all but free
     /// motion, the runs `fingertip evaluate` scores one by one.
     pub fn single_event() -> &'static [Scenario] {
-        &Scenario::ALL[..18]
+        &Scenario::ALL[..19]
     }
 
     /// The single-event scenarios whose expected event is a disturbance (taps and bursts
@@ -349,6 +352,7 @@ impl Scenario {
             Scenario::DisturbanceSlow2 => "disturbance_slow_2",
             Scenario::KnockLink1 => "knock_link1",
             Scenario::KnockLink2 => "knock_link2",
+            Scenario::KnockPad => "knock_pad",
             Scenario::FreeMotion => "free_motion",
         }
     }
@@ -413,6 +417,9 @@ impl Scenario {
             }
             Scenario::KnockLink1 => "a tap or burst strikes link 1 while moving at 5 cm/s",
             Scenario::KnockLink2 => "a tap or burst strikes link 2 while moving at 5 cm/s",
+            Scenario::KnockPad => {
+                "a tap or burst strikes the pad from in front, pressing it, while moving at 5 cm/s"
+            }
             Scenario::FreeMotion => "random event-free motion, touching nothing",
         }
     }
@@ -434,6 +441,7 @@ impl Scenario {
             Scenario::DisturbanceSlow2 => Kind::Disturbance(Size::Either),
             Scenario::KnockLink1 => Kind::Knock(Struck::Link1),
             Scenario::KnockLink2 => Kind::Knock(Struck::Link2),
+            Scenario::KnockPad => Kind::Knock(Struck::Pad),
             Scenario::SuddenAccelStandstill | Scenario::SuddenAccelMoving5 => Kind::SuddenAccel,
             Scenario::FreeMotion => Kind::Free,
         }
@@ -653,7 +661,7 @@ impl fmt::Display for Scenario {
 /// The name is not one of [`Scenario::all`]'s.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, contact_braking, contact_very_soft_1, disturbance_slow_2, knock_link1, knock_link2, free_motion)"
+    "unknown scenario `{0}` (known: contact_hard_8, contact_hard_5, contact_hard_2, contact_soft_8, contact_soft_5, contact_soft_2, object_moves_5, link_collision_8, link_collision_2, disturbance_large_5, disturbance_small_5, sudden_accel_standstill, sudden_accel_moving_5, contact_braking, contact_very_soft_1, disturbance_slow_2, knock_link1, knock_link2, knock_pad, free_motion)"
 )]
 pub struct UnknownScenario(pub String);
 
@@ -1186,9 +1194,13 @@ fn approach_scene(
         Kind::Knock(body) => {
             let k = Knock::choose(prng, r);
             values.extend(k.values());
-            // Nominal: a tap against the approach. Randomized: tap or burst, +x or -x.
+            // Nominal: a tap against the approach. Randomized: tap or burst, +x or -x; on
+            // the pad always against the approach (from in front, pressing it).
             let burst = r.random() && prng.random::<f64>() < 0.5;
-            let direction = random_direction(prng, r) + k.direction_offset;
+            let direction = match body {
+                Struck::Pad => std::f64::consts::PI,
+                _ => random_direction(prng, r),
+            } + k.direction_offset;
             let kind = if burst {
                 DisturbanceKind::Vibration {
                     amplitude: k.vibration_amplitude,
