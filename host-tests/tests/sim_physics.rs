@@ -402,6 +402,30 @@ fn knocks_push_the_finger_off_its_path_and_leave_the_skin_untouched() {
     }
 }
 
+/// A knock on the pad presses it as an object's push does: the film is quiet before the
+/// blow and fires within 2 ms of it, first upwards, while a knock on a link leaves it quiet
+/// (above).
+#[test]
+fn a_knock_on_the_pad_presses_the_film() {
+    for seed in 0..SEEDS {
+        let tr = run(Scenario::KnockPad, seed, seed > 0);
+        let on = onset_row(&tr);
+        let what = format!("knock_pad seed {seed}");
+        assert_eq!(tr.meta("disturbance_body"), Some("pad"), "{what}");
+        assert_stress_quiet(&tr, on, &format!("{what}, before the onset"));
+        let sr = col(&tr, "stress_rate");
+        let b = baseline(sr, on);
+        let first = sr[on..on + 2 * MS]
+            .iter()
+            .map(|x| x - b)
+            .find(|x| x.abs() > STRESS_QUIET);
+        assert!(
+            first.is_some_and(|x| x > 0.0),
+            "{what}: the film's first reading beyond its noise is {first:?}"
+        );
+    }
+}
+
 /// A very soft object at 1 cm/s: the stress rate stays at its noise floor (the force builds
 /// at 0.3 to 1.4 N/s), but the force against the motion grows steadily: by 18 to 86 mN
 /// after 60 ms, more than the sensor's noise averaged over 20 ms (a whole period of the
