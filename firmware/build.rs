@@ -9,7 +9,7 @@
 //!   (`git rev-parse HEAD` in the workspace, or `FINGERTIP_BUILD_HASH`; 0 when neither
 //!   tells), reported in the status heartbeat;
 //! - `build_consts.rs`: the detector image's CRC-32 (reported in the status heartbeat),
-//!   its source path and the sample timer's period for its rate (the CAN node id is found
+//!   its name and the sample timer's period for its rate (the CAN node id is found
 //!   at boot, not built in);
 //! - for the chip only: `memory.x` on the linker path and the link arguments of the
 //!   board binary (`-Tlink.x`, `-Tdefmt.x`, `--nmagic`), for the binary alone so that no
@@ -73,11 +73,6 @@ fn main() -> Result<()> {
         "/// CRC-32 (ISO-HDLC, as zlib's) of the embedded detector image."
     )?;
     writeln!(consts, "pub const CONFIG_CHECKSUM: u32 = {image_crc};")?;
-    writeln!(
-        consts,
-        "/// The configuration file the firmware was built with, from the workspace root."
-    )?;
-    writeln!(consts, "pub const CONFIG_SOURCE: &str = {config_rel:?};")?;
     writeln!(
         consts,
         "/// The embedded detector's name: the configuration file's stem, at most 16 bytes."

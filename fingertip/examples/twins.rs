@@ -115,7 +115,7 @@ impl Event {
             .unwrap_or(held.len() - 1);
         let parted_s = held.time()[parted];
         let peak: f64 = blow.meta("gives_way_peak_force_n")?.parse().ok()?;
-        let on_link = s.expected() == Some("link_collision");
+        let on_link = s.expected() == Some(sim::LINK_COLLISION);
         let freed = replay::replay(detector, &blow, |_, _, _| {}).ok()?;
         let tap_length = (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s);
         Some(Pair {
@@ -165,7 +165,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .filter(|(t, _)| *t == s)
             .map(|(_, p)| p)
             .collect();
-        let (what, on_what) = if s.expected() == Some("link_collision") {
+        let (what, on_what) = if s.expected() == Some(sim::LINK_COLLISION) {
             ("an obstacle", "link")
         } else {
             ("an object", "pad")
@@ -189,7 +189,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let tap_sized = count(&|p: &Pair| p.tap_sized);
             let other_tap_sized = count(&|p: &Pair| p.other_tap_sized);
             let (event, disturbance, nothing) =
-                (on(s.expected()), on(Some("disturbance")), on(None));
+                (on(s.expected()), on(Some(sim::DISTURBANCE)), on(None));
             let mut peaks: Vec<f64> = at.iter().map(|p| p.peak_n).collect();
             peaks.sort_by(f64::total_cmp);
             println!(

@@ -16,7 +16,9 @@ mod consts {
     include!(concat!(env!("OUT_DIR"), "/build_consts.rs"));
 }
 
-pub use consts::{CONFIG_CHECKSUM, CONFIG_NAME, CONFIG_SOURCE, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
+pub use consts::{CONFIG_CHECKSUM, CONFIG_NAME, TRIGGER_CLOCKS, TRIGGER_RATE_MHZ};
+/// The configuration file the firmware was built with, from the workspace root.
+pub use fingertip_tick::CONFIG_SOURCE;
 
 /// The sample rate, Hz: the sample timer's ([`TRIGGER_RATE_MHZ`]), rounded; the
 /// detector's own rate is within 100 ppm of it (`build.rs` checks). The fallback reports
