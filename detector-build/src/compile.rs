@@ -5,11 +5,11 @@
 
 use detector_core::feature::{MAX_SLOTS, Stage, WINDOW_POOL};
 use detector_core::{
-    Cdf, CdfSpec, ChannelMask, Confidence, EventMask, LevelParams, MAX_CHANNELS,
+    Cdf, CdfSpec, ChannelMask, Confidence, Early, EventMask, LevelParams, MAX_CHANNELS,
     MAX_DISTINCT_TERMS, MAX_EVENTS, MAX_FEATURES, MAX_PHASES, MAX_TERMS, NAME_LEN, Name,
 };
 
-use crate::config::{Config, ConfigError, EventSpec, Item, LevelSpec, Problem, Warning};
+use crate::config::{Config, ConfigError, EarlySpec, EventSpec, Item, LevelSpec, Problem, Warning};
 
 /// One feature judged by one CDF (the paper's ψ): evaluated once per tick however many
 /// terms of however many events name the same pair.
@@ -150,6 +150,7 @@ fn level(
     name: &'static str,
     spec: &LevelSpec,
     rate_hz: f32,
+    early: Option<Early>,
 ) -> Result<LevelParams, ConfigError> {
     let item = Item::Level(event.to_owned(), name);
     let on_rule = "must be within (0, 1]";
@@ -178,9 +179,17 @@ fn level(
     }
     let dwell = ticks_of(&item, "dwell_ms", spec.dwell_ms, rate_hz)?;
     let hold = ticks_of(&item, "hold_ms", spec.hold_ms, rate_hz)?;
-    // `on` in (0, 1], `off` at most `on`, a dwell and a hold of at least one tick: always a
-    // level.
-    LevelParams::new(on, off, dwell, hold).ok_or(ConfigError {
+    if let (Some(e), Some(spec_early)) = (early, &spec.early)
+        && e.dwell() > dwell
+    {
+        return err(
+            item,
+            Problem::EarlyDwell(spec_early.dwell_ms, spec.dwell_ms),
+        );
+    }
+    // `on` in (0, 1], `off` at most `on`, a dwell and a hold of at least one tick, an early
+    // dwell no longer than the dwell: always a level.
+    LevelParams::new(on, off, dwell, hold, early).ok_or(ConfigError {
         item,
         problem: Problem::Time {
             param: "dwell_ms",
@@ -362,15 +371,14 @@ impl Compiled {
         let item = || Item::Event(e.name.clone());
         at_most("context term", e.context.len(), MAX_TERMS, item())?;
         at_most("sensor term", e.sensor.len(), MAX_TERMS, item())?;
-        let levels = event_levels(e, self.rate_hz)?;
         let mut event = Event {
             name: core_name(&e.name),
             context: Vec::new(),
             sensor: Vec::new(),
             context_channels: 0,
             sensor_channels: 0,
-            levels,
-            onset_level: onset_level(e, levels[0].on())?,
+            levels: [LevelParams::checked(1, 0, 1, 1, None); 2],
+            onset_level: 0,
             excluded_by: 0,
         };
         for t in &e.context {
@@ -400,8 +408,55 @@ impl Compiled {
         if total > 3.0 + 1e-5 || total_q15 > detector_core::MAX_WEIGHT_SUM_Q15 {
             return err(Item::Event(e.name.clone()), Problem::WeightSum(total));
         }
+        let reads = event.context_channels | event.sensor_channels;
+        let early = [("alert", &e.alert), ("confirm", &e.confirm)].map(|(name, l)| {
+            l.early
+                .as_ref()
+                .map(|spec| self.early(config, spec, Item::Level(e.name.clone(), name), reads))
+                .transpose()
+        });
+        let [alert_early, confirm_early] = early;
+        event.levels = event_levels(e, self.rate_hz, [alert_early?, confirm_early?])?;
+        event.onset_level = onset_level(e, event.levels[0].on())?;
         self.events.push(event);
         Ok(())
+    }
+
+    /// A level's early dwell: its feature, which reads only channels in `reads` (the
+    /// event's terms'), and its level in the feature's unit.
+    fn early(
+        &self,
+        config: &Config,
+        spec: &EarlySpec,
+        item: Item,
+        reads: ChannelMask,
+    ) -> Result<Early, ConfigError> {
+        let Some(j) = config.features.iter().position(|g| g.name == spec.feature) else {
+            return err(item, Problem::UnknownFeature(spec.feature.clone()));
+        };
+        let slot = MAX_CHANNELS + j;
+        let unread = self.slot_channels.get(slot).copied().unwrap_or(0) & !reads;
+        if unread != 0 {
+            let channel = config
+                .channels
+                .get(unread.trailing_zeros() as usize)
+                .map(|c| c.name.clone())
+                .unwrap_or_default();
+            return err(item, Problem::EarlyChannel(spec.feature.clone(), channel));
+        }
+        if !(spec.above.is_finite() && spec.above.abs() < 32768.0) {
+            return err(item, Problem::EarlyLevel(spec.above));
+        }
+        let above = detector_core::Signal::from_f32(spec.above).to_bits();
+        let dwell = ticks_of(&item, "early.dwell_ms", spec.dwell_ms, self.rate_hz)?;
+        // A feature's slot and a dwell of at least one tick: always an early dwell.
+        Early::new(slot as u8, above, dwell).ok_or(ConfigError {
+            item,
+            problem: Problem::Time {
+                param: "early.dwell_ms",
+                value: spec.dwell_ms,
+            },
+        })
     }
 
     /// Each event's `excludes`, turned around: the events whose confirm level holds it down.
@@ -462,9 +517,13 @@ impl Compiled {
 }
 
 /// An event's alert and confirm levels; confirm's `on` at least alert's.
-fn event_levels(e: &EventSpec, rate_hz: f32) -> Result<[LevelParams; 2], ConfigError> {
-    let alert = level(&e.name, "alert", &e.alert, rate_hz)?;
-    let confirm = level(&e.name, "confirm", &e.confirm, rate_hz)?;
+fn event_levels(
+    e: &EventSpec,
+    rate_hz: f32,
+    early: [Option<Early>; 2],
+) -> Result<[LevelParams; 2], ConfigError> {
+    let alert = level(&e.name, "alert", &e.alert, rate_hz, early[0])?;
+    let confirm = level(&e.name, "confirm", &e.confirm, rate_hz, early[1])?;
     if confirm.on() < alert.on() {
         return err(
             Item::Level(e.name.clone(), "confirm"),

@@ -89,7 +89,7 @@ pub struct SensorTerm {
 }
 
 /// A decision level with hysteresis, a minimum dwell and a hold.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LevelSpec {
     /// The level is raised once the confidence has stayed at or above `on` for the dwell.
@@ -107,6 +107,25 @@ pub struct LevelSpec {
     /// event, one rise of the level.
     #[serde(default)]
     pub hold_ms: f32,
+    /// A shorter dwell, taken once a feature has shown what the event is: the level is
+    /// raised after `early.dwell_ms` instead once the feature has been above its level at
+    /// one of the ticks of the run at or above `on`. Default: none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub early: Option<EarlySpec>,
+}
+
+/// A level's shorter dwell (see [`LevelSpec::early`]).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EarlySpec {
+    /// The feature watched; it may read only channels the event's terms read, so that a
+    /// fault on them degrades the event (while an event is degraded, nothing shows).
+    pub feature: String,
+    /// The level the feature must pass, in its unit; below 32768 in magnitude.
+    pub above: f32,
+    /// The shorter dwell in ms, rounded to ticks as `dwell_ms`; at most the level's dwell
+    /// once both are rounded.
+    pub dwell_ms: f32,
 }
 
 /// An event (eq. 14): Ψ = Π context confidences × Σ weight × sensor confidence.
@@ -241,6 +260,13 @@ pub enum Problem {
     },
     /// A channel's scale is not a positive, finite number.
     Scale(f32),
+    /// An early dwell's level is not finite or not below 32768 in magnitude.
+    EarlyLevel(f32),
+    /// An early dwell is longer than the level's own dwell, in ticks: (early, own), in ms.
+    EarlyDwell(f32, f32),
+    /// An early dwell's feature reads channel `.1`, which none of the event's terms read
+    /// (the feature's name first).
+    EarlyChannel(String, String),
     /// The term would be one distinct (feature, CDF) pair more than the detector holds
     /// (the limit given).
     DistinctTerms(usize),
@@ -291,6 +317,18 @@ impl core::fmt::Display for Problem {
             Problem::WeightSum(s) => write!(f, "sensor weights sum to {s:.3}, above 3"),
             Problem::Level { param, value, rule } => write!(f, "{param} = {value} {rule}"),
             Problem::Scale(k) => write!(f, "scale = {k} must be a positive, finite number"),
+            Problem::EarlyLevel(v) => write!(
+                f,
+                "early.above = {v} must be finite and below 32768 in magnitude"
+            ),
+            Problem::EarlyDwell(early, own) => write!(
+                f,
+                "early.dwell_ms = {early} must be at most the level's dwell_ms = {own}"
+            ),
+            Problem::EarlyChannel(feature, channel) => write!(
+                f,
+                "early.feature '{feature}' reads channel '{channel}', which none of the event's terms read (a fault on it would go unnoticed)"
+            ),
             Problem::DistinctTerms(n) => write!(
                 f,
                 "the events' terms judge more than {n} distinct (feature, CDF) pairs"

@@ -15,8 +15,8 @@ use detector_core::Detector;
 
 pub use compile::{Compiled, Event, Psi, Weighted, compile};
 pub use config::{
-    ChannelSpec, Config, ConfigError, ContextTerm, EventSpec, FeatureSpec, Item, LevelSpec,
-    PhaseSpec, Problem, SensorTerm, Warning,
+    ChannelSpec, Config, ConfigError, ContextTerm, EarlySpec, EventSpec, FeatureSpec, Item,
+    LevelSpec, PhaseSpec, Problem, SensorTerm, Warning,
 };
 pub use image::image_crc;
 pub use load::LoadError;

@@ -297,6 +297,16 @@ impl Detector {
             return Err(ImageError::Invalid("sensor term count"));
         }
         let levels = [LevelParams::read_image(r)?, LevelParams::read_image(r)?];
+        // An early dwell watches a feature of the detector that reads only channels the
+        // event's terms read, so that a fault it would read degrades the event.
+        for early in levels.iter().filter_map(LevelParams::early) {
+            let slot = usize::from(early.slot());
+            let feature = slot - MAX_CHANNELS;
+            let reads = self.slot_channels[slot & (MAX_SLOTS - 1)];
+            if feature >= self.stages.len() || reads & !(context_channels | sensor_channels) != 0 {
+                return Err(ImageError::Invalid("early dwell's feature"));
+            }
+        }
         let onset_level = r.u16()?;
         if onset_level >= levels[0].on {
             return Err(ImageError::Invalid("onset level"));
@@ -426,6 +436,11 @@ impl Detector {
     /// The events possible in a phase.
     pub fn phase_events(&self, phase: PhaseId) -> EventMask {
         self.phases.get(usize::from(phase.0)).copied().unwrap_or(0)
+    }
+
+    /// An event's alert and confirm levels.
+    pub fn event_levels(&self, event: EventId) -> Option<[LevelParams; 2]> {
+        self.events.get(usize::from(event.0)).map(|e| e.levels)
     }
 
     /// The channels an event's features read (context and sensor terms together).

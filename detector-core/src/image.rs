@@ -5,7 +5,8 @@
 //!
 //! # Layout
 //!
-//! Little-endian. The magic [`MAGIC`] (`FTD9`, the digit is the layout's version), then
+//! Little-endian. The magic [`MAGIC`] (`FTDA`, its last character is the layout's version,
+//! 1-9 then A-Z), then
 //! each [`Section`] in [`Section::ORDER`], each opened by its tag byte:
 //!
 //! | section | tag | contents |
@@ -16,7 +17,7 @@
 //! | [`Section::SlotChannels`] | 4 | per slot in use ([`Section::slots_in_use`]: the channels' slots, then one per feature): the channels it depends on (`u32` mask) |
 //! | [`Section::Taps`] | 5 | the STE window taps (`u32`, Q24), [`crate::feature::WINDOW_POOL`] of them |
 //! | [`Section::Terms`] | 6 | a count, then per distinct (feature, CDF) pair: the slot, the CDF (its shape's tag, then its values) |
-//! | [`Section::Events`] | 7 | a count, then per event: name, context terms (count, pair indices), sensor terms (count, pair index and Q15 weight each), alert and confirm levels (on, off, dwell, hold: `u16`), onset level (`u16`) |
+//! | [`Section::Events`] | 7 | a count, then per event: name, context terms (count, pair indices), sensor terms (count, pair index and Q15 weight each), alert and confirm levels (on, off, dwell, hold: `u16`; an early dwell's flag `u8`, and if 1 its slot `u8`, level `i32` and dwell `u16`), onset level (`u16`) |
 //! | [`Section::Phases`] | 8 | a count, then per phase: name, event mask (`u8`) |
 //!
 //! A name is its length (`u8`) and its UTF-8 bytes; a count is one byte. Each compiled item
@@ -26,8 +27,8 @@
 
 use crate::Name;
 
-/// The first four bytes of every image (the digit is the layout's version).
-pub const MAGIC: [u8; 4] = *b"FTD9";
+/// The first four bytes of every image (the last character is the layout's version).
+pub const MAGIC: [u8; 4] = *b"FTDA";
 
 /// An image's sections, each opened by its tag byte (the discriminant), in
 /// [`Section::ORDER`]: the one statement of the layout that the writer and the loader both

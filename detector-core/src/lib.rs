@@ -22,8 +22,8 @@ pub use feature::{Crossing, LongerWarmUp, Shut, Stage, StageError, StageSpec, Wi
 pub use image::{ImageError, Sink};
 pub use num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 pub use state::{
-    Decision, EventId, Inputs, Level, LevelParams, LevelState, Output, PhaseId, SAVED_MAGIC, State,
-    StateError,
+    Decision, Early, EventId, Inputs, Level, LevelParams, LevelState, Output, PhaseId, SAVED_MAGIC,
+    State, StateError,
 };
 pub use tick::DetectorTick;
 

@@ -133,26 +133,84 @@ impl Output {
     }
 }
 
-/// A decision level: up at `on` (Q15) after `dwell` ticks in a row, down below `off` after
-/// `hold` ticks in a row.
+/// A shorter dwell for a level, taken once a feature has shown what the event is: the level
+/// is raised after `dwell` ticks in a row at or above `on` instead of its own dwell once the
+/// feature in `slot` has been above `above` at one of the ticks of the run.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Early {
+    pub(crate) slot: u8,
+    pub(crate) above: i32,
+    pub(crate) dwell: u16,
+}
+
+impl Early {
+    /// The shorter dwell `dwell` (at least 1 tick) once the feature in `slot` (a feature's
+    /// slot, `MAX_CHANNELS..MAX_SLOTS`) has been above `above` (raw 16.16); `None` outside
+    /// those ranges.
+    pub const fn new(slot: u8, above: i32, dwell: u16) -> Option<Early> {
+        if dwell == 0 || (slot as usize) < MAX_CHANNELS || slot as usize >= MAX_SLOTS {
+            None
+        } else {
+            Some(Early { slot, above, dwell })
+        }
+    }
+
+    /// The slot of the feature watched.
+    pub const fn slot(&self) -> u8 {
+        self.slot
+    }
+
+    /// The level (raw 16.16) the feature must pass.
+    pub const fn above(&self) -> i32 {
+        self.above
+    }
+
+    /// Ticks in a row at or above `on` before the level is raised, once the feature has
+    /// passed its level.
+    pub const fn dwell(&self) -> u16 {
+        self.dwell
+    }
+}
+
+/// A decision level: up at `on` (Q15) after `dwell` ticks in a row (or `early`'s, once its
+/// feature has shown), down below `off` after `hold` ticks in a row.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct LevelParams {
     pub(crate) on: u16,
     pub(crate) off: u16,
     pub(crate) dwell: u16,
     pub(crate) hold: u16,
+    pub(crate) early: Option<Early>,
 }
 
 impl LevelParams {
     /// A level raised once the confidence has stayed at or above `on` (Q15, in (0, 1]) for
     /// `dwell` ticks in a row (at least 1) and lowered once it has stayed below `off` (at
-    /// most `on`) for `hold` ticks in a row (at least 1); `None` outside those ranges.
+    /// most `on`) for `hold` ticks in a row (at least 1); with `early`, raised after its
+    /// dwell (at most `dwell`) instead once its feature has passed its level during the
+    /// run. `None` outside those ranges.
     ///
     /// The hold makes one physical event one rise of the level: a confidence that dips
     /// below `off` for less than `hold` ticks and comes back keeps the level up instead of
     /// raising it a second time.
-    pub const fn new(on: u16, off: u16, dwell: u16, hold: u16) -> Option<LevelParams> {
-        if on == 0 || on > Confidence::ONE.to_bits() || off > on || dwell == 0 || hold == 0 {
+    pub const fn new(
+        on: u16,
+        off: u16,
+        dwell: u16,
+        hold: u16,
+        early: Option<Early>,
+    ) -> Option<LevelParams> {
+        let early_fits = match early {
+            Some(e) => e.dwell <= dwell,
+            None => true,
+        };
+        if on == 0
+            || on > Confidence::ONE.to_bits()
+            || off > on
+            || dwell == 0
+            || hold == 0
+            || !early_fits
+        {
             None
         } else {
             Some(LevelParams {
@@ -160,6 +218,7 @@ impl LevelParams {
                 off,
                 dwell,
                 hold,
+                early,
             })
         }
     }
@@ -167,8 +226,21 @@ impl LevelParams {
     /// [`LevelParams::new`] for generated code's constants: values it refuses fail the
     /// build of the generated code.
     #[doc(hidden)]
-    pub const fn checked(on: u16, off: u16, dwell: u16, hold: u16) -> LevelParams {
-        match LevelParams::new(on, off, dwell, hold) {
+    pub const fn checked(
+        on: u16,
+        off: u16,
+        dwell: u16,
+        hold: u16,
+        early: Option<(u8, i32, u16)>,
+    ) -> LevelParams {
+        let early = match early {
+            Some((slot, above, dwell)) => match Early::new(slot, above, dwell) {
+                Some(e) => Some(e),
+                None => panic!("decision level's early dwell"),
+            },
+            None => None,
+        };
+        match LevelParams::new(on, off, dwell, hold, early) {
             Some(l) => l,
             None => panic!("decision level"),
         }
@@ -194,6 +266,22 @@ impl LevelParams {
         self.hold
     }
 
+    /// The shorter dwell taken once a feature has shown, if any.
+    pub const fn early(&self) -> Option<Early> {
+        self.early
+    }
+
+    /// Whether the early dwell's feature shows at this tick in `state`: above its level,
+    /// the event not `degraded` (a feature reading a faulty channel shows nothing). False
+    /// without an early dwell.
+    #[inline(always)]
+    pub fn shown(&self, state: &State, degraded: bool) -> bool {
+        match self.early {
+            Some(e) => !degraded && state.values[usize::from(e.slot) & (MAX_SLOTS - 1)] > e.above,
+            None => false,
+        }
+    }
+
     /// This level as a Rust expression for generated code.
     pub fn rust(&self) -> Rust<'_, LevelParams> {
         Rust(self)
@@ -201,7 +289,15 @@ impl LevelParams {
 
     pub(crate) fn read_image(r: &mut Reader<'_>) -> Result<LevelParams, ImageError> {
         let (on, off, dwell, hold) = (r.u16()?, r.u16()?, r.u16()?, r.u16()?);
-        LevelParams::new(on, off, dwell, hold).ok_or(ImageError::Invalid("decision level"))
+        let early = match r.u8()? {
+            0 => None,
+            1 => {
+                let (slot, above, dwell) = (r.u8()?, r.i32()?, r.u16()?);
+                Some(Early::new(slot, above, dwell).ok_or(ImageError::Invalid("early dwell"))?)
+            }
+            _ => return Err(ImageError::Invalid("early dwell flag")),
+        };
+        LevelParams::new(on, off, dwell, hold, early).ok_or(ImageError::Invalid("decision level"))
     }
 
     /// Appends this level to a detector image.
@@ -210,6 +306,15 @@ impl LevelParams {
         w.u16(self.off);
         w.u16(self.dwell);
         w.u16(self.hold);
+        match self.early {
+            None => w.u8(0),
+            Some(e) => {
+                w.u8(1);
+                w.u8(e.slot);
+                w.i32(e.above);
+                w.u16(e.dwell);
+            }
+        }
     }
 }
 
@@ -218,9 +323,13 @@ impl core::fmt::Display for Rust<'_, LevelParams> {
         let l = self.0;
         write!(
             f,
-            "LevelParams::checked({}, {}, {}, {})",
+            "LevelParams::checked({}, {}, {}, {}, ",
             l.on, l.off, l.dwell, l.hold
-        )
+        )?;
+        match l.early {
+            None => f.write_str("None)"),
+            Some(e) => write!(f, "Some(({}, {}, {})))", e.slot, e.above, e.dwell),
+        }
     }
 }
 
@@ -232,6 +341,8 @@ pub struct LevelState {
     pub(crate) up: bool,
     /// Ticks in a row at or above `on` while down, below `off` while up.
     run: u16,
+    /// While down: the early dwell's feature has passed its level during the run.
+    shown: bool,
 }
 
 impl LevelState {
@@ -241,10 +352,12 @@ impl LevelState {
     }
 
     /// One tick of a level at confidence `q` (Q15): up at `on` after `dwell` ticks in a
-    /// row, down below `off` after `hold` ticks in a row. Returns whether the level was
-    /// raised at this tick.
+    /// row (after the early dwell once `shown` has been true at a tick of the run), down
+    /// below `off` after `hold` ticks in a row. `shown` says whether the early dwell's
+    /// feature is above its level at this tick (ignored without an early dwell). Returns
+    /// whether the level was raised at this tick.
     #[inline(always)]
-    pub fn step(&mut self, p: &LevelParams, q: u16) -> bool {
+    pub fn step(&mut self, p: &LevelParams, q: u16, shown: bool) -> bool {
         if self.up {
             self.run = if q < p.off {
                 self.run.saturating_add(1)
@@ -257,12 +370,23 @@ impl LevelState {
             false
         } else if q >= p.on {
             self.run = self.run.saturating_add(1);
-            if self.run >= p.dwell {
-                *self = LevelState { up: true, run: 0 };
+            let dwell = match p.early {
+                Some(e) => {
+                    self.shown |= shown;
+                    if self.shown { e.dwell } else { p.dwell }
+                }
+                None => p.dwell,
+            };
+            if self.run >= dwell {
+                *self = LevelState {
+                    up: true,
+                    run: 0,
+                    shown: false,
+                };
             }
             self.up
         } else {
-            self.run = 0;
+            *self = LevelState::default();
             false
         }
     }
@@ -341,6 +465,7 @@ impl State {
             for l in &e.levels {
                 w.put([u8::from(l.up)]);
                 w.put(l.run.to_le_bytes());
+                w.put([u8::from(l.shown)]);
             }
         }
     }
@@ -387,6 +512,7 @@ impl State {
             for l in &mut e.levels {
                 l.up = flag(r.take::<1>()[0])?;
                 l.run = u16::from_le_bytes(r.take());
+                l.shown = flag(r.take::<1>()[0])?;
             }
         }
         Ok(State {
@@ -400,12 +526,13 @@ impl State {
     }
 }
 
-/// The first bytes of a saved state: its format, version 5 (128 features; filter states
-/// holding their output times 2³², primed by their sample count).
-pub const SAVED_MAGIC: [u8; 4] = *b"FTS5";
+/// The first bytes of a saved state: its format, version 6 (128 features; filter states
+/// holding their output times 2³², primed by their sample count; levels keeping whether
+/// their early dwell's feature has shown).
+pub const SAVED_MAGIC: [u8; 4] = *b"FTS6";
 
-/// Bytes of an event's saved state: rising, onset, and each level's up and run.
-const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2);
+/// Bytes of an event's saved state: rising, onset, and each level's up, run and shown.
+const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2 + 1);
 
 /// Writes a saved state front to back (the buffer is exactly as long as what is written).
 struct Cursor<'b> {
@@ -597,8 +724,13 @@ pub fn decide_event(
     out: &mut Output,
 ) {
     let i = i & (MAX_EVENTS - 1);
-    let st = &mut state.events[i];
     let bit: EventMask = 1 << i;
+    let degraded = out.degraded & bit != 0;
+    let shown = [
+        levels[0].shown(state, degraded),
+        levels[1].shown(state, degraded),
+    ];
+    let st = &mut state.events[i];
     let q = c.to_bits();
     if q <= onset_level {
         st.rising = false;
@@ -611,8 +743,8 @@ pub fn decide_event(
         *alert = LevelState::default();
         *confirm = LevelState::default();
     }
-    let raised_alert = !excluded && alert.step(&levels[0], q);
-    let raised_confirm = !excluded && confirm.step(&levels[1], q);
+    let raised_alert = !excluded && alert.step(&levels[0], q, shown[0]);
+    let raised_confirm = !excluded && confirm.step(&levels[1], q, shown[1]);
     out.alerting |= bit * EventMask::from(alert.up);
     out.confirmed |= bit * EventMask::from(confirm.up);
     let decision = |level| Decision {

@@ -29,9 +29,9 @@
 
 use std::path::PathBuf;
 
-use detector_build::{Config, EventSpec, LevelSpec};
+use detector_build::{Config, EarlySpec, EventSpec, LevelSpec};
 use detector_core::Detector;
-use detector_core::{CdfSpec, LevelParams, LevelState};
+use detector_core::{CdfSpec, EventId, LevelParams, LevelState};
 use rayon::prelude::*;
 
 use crate::corpus::{CorpusReport, RecordingResult};
@@ -484,12 +484,12 @@ fn fit_context(base: &CdfSpec, event: &[f64]) -> (CdfSpec, String) {
 }
 
 /// `level` with `on` moved to `on`, `off` keeping its ratio.
-fn scaled(level: LevelSpec, on: f32) -> LevelSpec {
+fn scaled(level: &LevelSpec, on: f32) -> LevelSpec {
     let ratio = if level.on > 0.0 { on / level.on } else { 1.0 };
     LevelSpec {
         on: round4(f64::from(on)),
         off: round4(f64::from((level.off * ratio).min(on))),
-        ..level
+        ..level.clone()
     }
 }
 
@@ -501,11 +501,17 @@ fn with_levels(event: &EventSpec, on: f32, dwell_ms: f32) -> EventSpec {
     } else {
         1.0
     };
+    // An early dwell keeps its feature and level, and is at most the new dwell.
+    let early = event.confirm.early.clone().map(|early| EarlySpec {
+        dwell_ms: early.dwell_ms.min(dwell_ms),
+        ..early
+    });
     e.confirm = LevelSpec {
         dwell_ms,
-        ..scaled(event.confirm, on)
+        early,
+        ..scaled(&event.confirm, on)
     };
-    e.alert = scaled(event.alert, (on * alert_ratio).min(on));
+    e.alert = scaled(&event.alert, (on * alert_ratio).min(on));
     e.onset_level = e.onset_level.min(e.alert.on * 0.99);
     e
 }
@@ -523,6 +529,8 @@ struct Judged {
     evaluated: u8,
     judged: u8,
     confidences: [u16; detector_core::MAX_EVENTS],
+    /// The events whose confirm level's early dwell has its feature showing.
+    shown: u8,
 }
 
 /// A recording replayed once: its ticks that can move a decision level (an event with a
@@ -555,11 +563,17 @@ impl Recorded {
                 evaluated: out.evaluated,
                 judged: out.evaluated & !out.unjudgeable,
                 confidences: [0; detector_core::MAX_EVENTS],
+                shown: 0,
             };
             let events = detector.events().len();
             for (e, q) in judged.confidences.iter_mut().enumerate().take(events) {
-                if judged.judged & (1 << e) != 0 {
+                let bit = 1 << e;
+                if judged.judged & bit != 0 {
                     *q = out.confidences[e].to_bits();
+                    let confirm = detector.event_levels(EventId(e as u8)).map(|l| l[1]);
+                    if confirm.is_some_and(|l| l.shown(tick.state, out.degraded & bit != 0)) {
+                        judged.shown |= bit;
+                    }
                 }
             }
             let same = ticks.last().is_some_and(|(_, last): &(u32, Judged)| {
@@ -620,7 +634,7 @@ impl Recorded {
                     let state = &mut states[c][e];
                     if !judged || excluded {
                         *state = LevelState::default();
-                    } else if state.step(&set[e], q) {
+                    } else if state.step(&set[e], q, tick.shown & bit != 0) {
                         raised[c].push(DecisionRecord {
                             event: names[e].clone(),
                             level: detector_core::Level::Confirm.name(),
@@ -638,6 +652,7 @@ impl Recorded {
                 // The ticks at confidence 0 since: they move a level only until it is idle.
                 let quiet = Judged {
                     confidences: [0; detector_core::MAX_EVENTS],
+                    shown: 0,
                     ..before
                 };
                 for _ in 0..*gap {
@@ -1122,6 +1137,13 @@ fn level_table(level: &LevelSpec) -> toml_edit::InlineTable {
     t.insert("off", number(level.off));
     t.insert("dwell_ms", number(level.dwell_ms));
     t.insert("hold_ms", number(level.hold_ms));
+    if let Some(early) = &level.early {
+        let mut e = toml_edit::InlineTable::new();
+        e.insert("feature", early.feature.as_str().into());
+        e.insert("above", number(early.above));
+        e.insert("dwell_ms", number(early.dwell_ms));
+        t.insert("early", e.into());
+    }
     t
 }
 
@@ -1318,6 +1340,7 @@ mod tests {
                 evaluated: 0b11,
                 judged: 0b11,
                 confidences,
+                shown: 0,
             }
         };
         let high = 30_000;
@@ -1332,7 +1355,7 @@ mod tests {
                 (gap, tick(0.1, [high, high])),
             ],
         };
-        let level = LevelParams::checked(16_384, 8_192, 1, 3);
+        let level = LevelParams::checked(16_384, 8_192, 1, 3, None);
         let names = vec!["a".to_string(), "b".to_string()];
         let raised = |r: &Recorded, excluded_by: &[u8]| -> Vec<(String, f64)> {
             r.confirmations(&[vec![level, level]], excluded_by, &names)[0]

@@ -44,7 +44,10 @@
 //!   `dwell = max(1, round(dwell_ms · rate_hz / 1000))` (so a dwell of 0 raises it on the
 //!   first tick at or above `on`; the documentation leaves the conversion to ticks open, this
 //!   is the engine's), and lowered at the tick on which the confidence has been below `off`
-//!   for `hold` consecutive ticks (converted the same way from `hold_ms`). A raised
+//!   for `hold` consecutive ticks (converted the same way from `hold_ms`). A level with an
+//!   early dwell is raised after that dwell instead (converted the same way) once its
+//!   feature has been strictly above its level at a tick of the current run, the event not
+//!   degraded at that tick; the level is the core's, rounded to 16.16. A raised
 //!   level reports the confidence, the tick and the onset: the first tick of the current
 //!   run of confidence strictly above `onset_level`. Switching to another phase lowers every
 //!   level and forgets onsets; only the active phase's events are evaluated. While an event
@@ -256,6 +259,8 @@ struct LevelParams {
     off: f64,
     dwell: u32,
     hold: u32,
+    /// The early dwell: the feature watched, its level, the shorter dwell.
+    early: Option<(usize, f64, u32)>,
 }
 
 #[derive(Clone, Debug)]
@@ -333,6 +338,8 @@ struct LevelState {
     run: u32,
     /// Consecutive ticks below `off`.
     below: u32,
+    /// The early dwell's feature has been above its level during the current run.
+    shown: bool,
 }
 
 /// One event's decision state.
@@ -530,11 +537,22 @@ impl Model {
                 .position(|g| *g == name)
                 .ok_or_else(|| ModelError(name.to_string()))
         };
-        let level = |l: &detector_build::LevelSpec| LevelParams {
-            on: f64::from(l.on),
-            off: f64::from(l.off),
-            dwell: level_ticks(l.dwell_ms, config.rate_hz),
-            hold: level_ticks(l.hold_ms, config.rate_hz),
+        let level = |l: &detector_build::LevelSpec| -> Result<LevelParams, ModelError> {
+            Ok(LevelParams {
+                on: f64::from(l.on),
+                off: f64::from(l.off),
+                dwell: level_ticks(l.dwell_ms, config.rate_hz),
+                hold: level_ticks(l.hold_ms, config.rate_hz),
+                early: match &l.early {
+                    // The level as the core holds it (16.16).
+                    Some(e) => Some((
+                        feature(&e.feature)?,
+                        Signal::from_f32(e.above).to_f64(),
+                        level_ticks(e.dwell_ms, config.rate_hz),
+                    )),
+                    None => None,
+                },
+            })
         };
         let mut events = Vec::new();
         for e in &config.events {
@@ -557,7 +575,7 @@ impl Model {
             events.push(Event {
                 context,
                 sensor,
-                levels: [level(&e.alert), level(&e.confirm)],
+                levels: [level(&e.alert)?, level(&e.confirm)?],
                 onset_level: f64::from(e.onset_level),
                 excluded_by: 0,
             });
@@ -784,18 +802,25 @@ impl Model {
         j
     }
 
-    /// Stage 4: decision levels and onsets for the events in `evaluated` from their
-    /// confidences (`confidences[i]` for event `i`); events in `unjudgeable` have their
-    /// levels lowered and count as confidence 0. Usable on any confidences, e.g. the
-    /// fixed-point engine's, to check its decisions alone.
+    /// Stage 4: decision levels and onsets for the events `judgement.evaluated` from their
+    /// confidences (`judgement.confidences[i]` for event `i`); events in
+    /// `judgement.unjudgeable` have their levels lowered and count as confidence 0; early
+    /// dwells read `features` (in configuration order) and show nothing for events in
+    /// `judgement.degraded`. Usable on
+    /// any confidences and features, e.g. the fixed-point engine's, to check its decisions
+    /// alone.
     pub fn decide(
         &self,
         state: &mut ModelState,
         now: u32,
-        confidences: &[f64],
-        evaluated: u8,
-        unjudgeable: u8,
+        judgement: &Judgement,
+        features: &[f64],
     ) -> Decided {
+        let (confidences, evaluated, unjudgeable) = (
+            &judgement.confidences,
+            judgement.evaluated,
+            judgement.unjudgeable,
+        );
         let mut d = Decided::default();
         for (i, e) in self.events.iter().enumerate() {
             let bit = 1u8 << i;
@@ -829,6 +854,16 @@ impl Model {
                 } else {
                     0
                 };
+                // The early dwell's feature, above its level at a tick of the run while
+                // the event has all its terms.
+                let shows = p.early.is_some_and(|(f, above, _)| {
+                    judgement.degraded & bit == 0 && features.get(f).is_some_and(|&x| x > above)
+                });
+                l.shown = l.run > 0 && (l.shown || shows);
+                let dwell = match p.early {
+                    Some((_, _, early)) if l.shown => early,
+                    _ => p.dwell,
+                };
                 l.below = if c < p.off {
                     l.below.saturating_add(1)
                 } else {
@@ -837,7 +872,7 @@ impl Model {
                 if l.up && l.below >= p.hold {
                     l.up = false;
                 }
-                if !l.up && l.run >= p.dwell {
+                if !l.up && l.run >= dwell {
                     l.up = true;
                     d.decisions.push(ModelDecision {
                         event: i,
@@ -868,13 +903,7 @@ impl Model {
     ) -> ModelOutput {
         let features = self.update_features(state, samples);
         let judgement = self.judge(state, &features, faults);
-        let decided = self.decide(
-            state,
-            now,
-            &judgement.confidences,
-            judgement.evaluated,
-            judgement.unjudgeable,
-        );
+        let decided = self.decide(state, now, &judgement, &features);
         ModelOutput {
             features,
             judgement,

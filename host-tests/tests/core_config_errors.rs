@@ -7,7 +7,9 @@
 mod support;
 
 use detector_build::LoadError;
-use detector_build::{Config, ConfigError, Item, Problem, Warning};
+use detector_build::{
+    ChannelSpec, Config, ConfigError, EarlySpec, FeatureSpec, Item, Problem, Warning,
+};
 use detector_core::{
     CdfError, CdfSpec, Crossing, LongerWarmUp, Shut, StageError, StageSpec, Window,
 };
@@ -929,4 +931,111 @@ fn an_event_in_no_phase_and_a_phase_without_events_are_warned_of() {
             .warnings
             .is_empty()
     );
+}
+
+/// An early dwell names a feature that exists and reads only channels the event's terms
+/// read, at a level a feature can hold, no longer than its level's dwell once both are
+/// rounded to ticks; on either level.
+#[test]
+fn an_early_dwell_is_checked() {
+    let early = |feature: &str, above: f32, dwell_ms: f32| EarlySpec {
+        feature: name(feature),
+        above,
+        dwell_ms,
+    };
+    let with = |e: EarlySpec| {
+        move |c: &mut Config| {
+            c.events[0].confirm.dwell_ms = 5.0;
+            c.events[0].confirm.early = Some(e);
+        }
+    };
+    let mut fine = good();
+    with(early("fa", 0.5, 2.0))(&mut fine);
+    assert!(detector_build::build(&fine).is_ok());
+    // As long as the dwell is allowed; a dwell of 0 rounds to one tick, as the level's.
+    with(early("fa", 0.5, 5.0))(&mut fine);
+    assert!(detector_build::build(&fine).is_ok());
+
+    let e = reject(
+        with(early("nope", 0.5, 2.0)),
+        &["event 'e', confirm level", "feature 'nope'"],
+    );
+    assert_eq!(e.problem, Problem::UnknownFeature(name("nope")));
+    assert_eq!(e.item, Item::Level(name("e"), "confirm"));
+    let e = reject(
+        with(early("fa", 0.5, 6.0)),
+        &["confirm level", "early.dwell_ms = 6", "dwell_ms = 5"],
+    );
+    assert_eq!(e.problem, Problem::EarlyDwell(6.0, 5.0));
+    for above in [f32::NAN, f32::INFINITY, -40_000.0, 32_768.0] {
+        let e = reject(with(early("fa", above, 2.0)), &["early.above"]);
+        assert!(matches!(e.problem, Problem::EarlyLevel(v) if v.to_bits() == above.to_bits()));
+    }
+    let e = reject(with(early("fa", 0.5, -1.0)), &["early.dwell_ms = -1"]);
+    assert_eq!(
+        e.problem,
+        Problem::Time {
+            param: "early.dwell_ms",
+            value: -1.0
+        }
+    );
+    // Channel `c` is read by no term of the event: a fault on it would not degrade it.
+    let e = reject(
+        |c| {
+            c.channels.push(ChannelSpec {
+                name: name("c"),
+                unit: name("N"),
+                scale: 1.0,
+            });
+            c.features.push(FeatureSpec {
+                name: name("fc"),
+                stage: raw("c"),
+            });
+            with(early("fc", 0.5, 2.0))(c);
+        },
+        &["early.feature 'fc'", "channel 'c'"],
+    );
+    assert_eq!(e.problem, Problem::EarlyChannel(name("fc"), name("c")));
+    // The alert level is checked the same way.
+    let e = reject(
+        |c| {
+            c.events[0].alert.early = Some(early("fa", 0.5, 3.0));
+        },
+        &[
+            "event 'e', alert level",
+            "early.dwell_ms = 3",
+            "dwell_ms = 0",
+        ],
+    );
+    assert_eq!(e.problem, Problem::EarlyDwell(3.0, 0.0));
+}
+
+/// In TOML, an early dwell is a table of `feature`, `above` and `dwell_ms`, nothing else.
+#[test]
+fn an_early_dwell_in_toml() {
+    let text = |early: &str| {
+        format!(
+            "rate_hz = 1000.0\n\
+             [[channel]]\nname = \"a\"\nunit = \"N\"\n\
+             [[feature]]\nname = \"fa\"\nstage = {{ raw = {{ input = \"a\" }} }}\n\
+             [[event]]\nname = \"e\"\n\
+             sensor = [{{ feature = \"fa\", weight = 1.0, cdf = {{ sigmoid = {{ low = 0.0, high = 1.0 }} }} }}]\n\
+             alert = {{ on = 0.5, off = 0.25 }}\n\
+             confirm = {{ on = 0.75, off = 0.5, dwell_ms = 5.0, early = {early} }}\n\
+             [[phase]]\nname = \"p\"\nevents = [\"e\"]\n"
+        )
+    };
+    let config = Config::from_toml(&text("{ feature = \"fa\", above = 0.5, dwell_ms = 2.0 }"))
+        .expect("valid");
+    let detector = detector_build::build(&config).expect("builds");
+    let [_, confirm] = detector
+        .event_levels(detector.event("e").expect("event"))
+        .expect("levels");
+    let e = confirm.early().expect("an early dwell");
+    assert_eq!((e.dwell(), e.above()), (2, 1 << 15));
+    let err = Config::from_toml(&text(
+        "{ feature = \"fa\", above = 0.5, dwell_ms = 2.0, below = 1.0 }",
+    ))
+    .expect_err("an unknown field");
+    assert!(err.to_string().contains("below"), "{err}");
 }

@@ -474,3 +474,54 @@ fn an_exclusion_holds_the_excluded_event_down_while_the_other_is_confirmed() {
     assert_eq!(confirmations(&make(false)), [(1, 0), (2, 1)]);
     assert_eq!(confirmations(&make(true)), [(1, 0), (5, 1)]);
 }
+
+/// Confirm after 5 ticks, or after 3 once `fy` (channel y, weight 0: it moves no
+/// confidence) has been strictly above ½ at a tick of the run: the run starts at tick 1.
+/// Shown at tick 1 or 2, the level rises at tick 3 (the run's third tick); shown only at
+/// tick 4, at tick 4; shown before the run, at the level and not above it, or while y is
+/// faulty (the event degraded), it waits the whole 5 ticks; a run broken by a tick below
+/// `on` (tick 3) forgets what was shown in it: the next run (from tick 4) waits 5 ticks
+/// unless shown again.
+#[test]
+fn early_dwell_once_its_feature_has_shown() {
+    let c = detector_config(1.0, true, false, |e| {
+        e.alert = level(0.5, 0.25, 0.0);
+        e.confirm = level(0.75, 0.5, 5.0);
+        e.confirm.early = Some(detector_build::EarlySpec {
+            feature: name("fy"),
+            above: 0.5,
+            dwell_ms: 3.0,
+        });
+    });
+    let script = |xs: &[f64], ys: &[(usize, f64)], faulty: &[usize]| -> Vec<Tick> {
+        let mut s: Vec<Tick> = xs.iter().map(|&x| at(x)).collect();
+        for &(t, y) in ys {
+            s[t].y = y;
+        }
+        for &t in faulty {
+            s[t].faults = 0b010;
+        }
+        s
+    };
+    let run_of = [0.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    let broken = [0.0, 1.0, 1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+    for (what, s, want) in [
+        ("nothing shown", script(&run_of, &[], &[]), 5),
+        ("shown at tick 2", script(&run_of, &[(2, 1.0)], &[]), 3),
+        ("shown at tick 1", script(&run_of, &[(1, 1.0)], &[]), 3),
+        ("shown at tick 4", script(&run_of, &[(4, 1.0)], &[]), 4),
+        ("shown before the run", script(&run_of, &[(0, 1.0)], &[]), 5),
+        ("at the level", script(&run_of, &[(2, 0.5)], &[]), 5),
+        ("while faulty", script(&run_of, &[(2, 1.0)], &[2]), 5),
+        ("in a broken run", script(&broken, &[(2, 1.0)], &[]), 8),
+        ("after the break", script(&broken, &[(5, 1.0)], &[]), 6),
+    ] {
+        let outs = run(&c, &s);
+        let confirms: Vec<_> = raised(&outs)
+            .into_iter()
+            .filter(|r| r.1 == Level::Confirm)
+            .collect();
+        // The confidence never returns to 0 after tick 1: every onset is tick 1.
+        assert_eq!(confirms, [(want, Level::Confirm, 1)], "{what}");
+    }
+}

@@ -25,7 +25,8 @@
 mod support;
 
 use detector_build::{
-    ChannelSpec, Config, ContextTerm, EventSpec, FeatureSpec, LevelSpec, PhaseSpec, SensorTerm,
+    ChannelSpec, Config, ContextTerm, EarlySpec, EventSpec, FeatureSpec, LevelSpec, PhaseSpec,
+    SensorTerm,
 };
 use detector_core::{
     Cdf, CdfSpec, Crossing, Detector, EventId, LongerWarmUp, Shut, Signal, StageSpec, Window,
@@ -230,6 +231,7 @@ fn any_levels() -> impl Strategy<Value = (LevelSpec, LevelSpec)> {
                 off,
                 dwell_ms,
                 hold_ms,
+                early: None,
             }
         })
     };
@@ -238,8 +240,8 @@ fn any_levels() -> impl Strategy<Value = (LevelSpec, LevelSpec)> {
         20 => (0.05f32..=0.5, 0.0f32..=0.05, 0.5f32..=1.0, 0.0f32..=0.5, proptest::array::uniform4(0.0f32..5.0))
             .prop_map(|(a_on, a_off, c_on, c_off, [a_dwell, c_dwell, a_hold, c_hold])| {
                 (
-                    LevelSpec { on: a_on, off: a_off, dwell_ms: a_dwell, hold_ms: a_hold },
-                    LevelSpec { on: c_on, off: c_off, dwell_ms: c_dwell, hold_ms: c_hold },
+                    LevelSpec { on: a_on, off: a_off, dwell_ms: a_dwell, hold_ms: a_hold, early: None },
+                    LevelSpec { on: c_on, off: c_off, dwell_ms: c_dwell, hold_ms: c_hold, early: None },
                 )
             }),
     ]
@@ -253,6 +255,9 @@ struct EventPlan {
     alert: LevelSpec,
     confirm: LevelSpec,
     onset_level: f32,
+    /// The confirm level's early dwell: its feature (`None`: the first sensor term's), its
+    /// level and its dwell.
+    early: Option<(Option<Ref>, f32, f32)>,
 }
 
 fn any_event() -> impl Strategy<Value = EventPlan> {
@@ -264,14 +269,23 @@ fn any_event() -> impl Strategy<Value = EventPlan> {
         ],
         any_levels(),
         prop_oneof![1 => any_f32(), 20 => Just(0.0f32), 5 => 0.0f32..0.05],
+        prop::option::weighted(
+            0.3,
+            (
+                prop::option::weighted(0.3, any_ref()),
+                prop_oneof![1 => any_f32(), 4 => -2.0f32..2.0],
+                prop_oneof![1 => any_f32(), 4 => 0.0f32..5.0],
+            ),
+        ),
     )
         .prop_map(
-            |(context, sensor, (alert, confirm), onset_level)| EventPlan {
+            |(context, sensor, (alert, confirm), onset_level, early)| EventPlan {
                 context,
                 sensor,
                 alert,
                 confirm,
                 onset_level,
+                early,
             },
         )
 }
@@ -360,6 +374,20 @@ fn any_config() -> impl Strategy<Value = Config> {
                         feature,
                         weight,
                         cdf,
+                    });
+                }
+                if let Some((r, above, dwell_ms)) = e.early {
+                    let feature = match r {
+                        Some(r) => resolve(&r, &features, "f0"),
+                        None => spec
+                            .sensor
+                            .first()
+                            .map_or(name("f0"), |t| t.feature.clone()),
+                    };
+                    spec.confirm.early = Some(EarlySpec {
+                        feature,
+                        above,
+                        dwell_ms,
                     });
                 }
                 c.events.push(spec);

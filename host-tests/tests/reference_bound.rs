@@ -68,9 +68,9 @@ mod support;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use detector_build::{Config, EventSpec};
+use detector_build::{Config, EarlySpec, EventSpec};
 use detector_core::{CdfSpec, Crossing, LongerWarmUp, Shut, Signal, StageSpec, Window};
-use host_tests::reference::{Model, cdf};
+use host_tests::reference::{Judgement, Model, cdf};
 use proptest::prelude::*;
 use support::*;
 
@@ -157,6 +157,9 @@ struct EventPlan {
     /// alert on, alert off, confirm on, confirm off, onset (fractions of 2^15), dwells.
     levels: [u16; 5],
     dwells: [u8; 2],
+    /// The confirm level's early dwell, on its first sensor term's feature: its level as a
+    /// fraction of 2^16 of the feature's range over the run.
+    early: Option<u16>,
 }
 
 #[derive(Clone, Debug)]
@@ -185,14 +188,16 @@ fn event_plan() -> impl Strategy<Value = EventPlan> {
         6000u16..=32768,
         any::<[u16; 5]>(),
         any::<[u8; 2]>(),
+        prop::option::of(any::<u16>()),
     )
         .prop_map(
-            |(context, sensor, weight_total, levels, dwells)| EventPlan {
+            |(context, sensor, weight_total, levels, dwells, early)| EventPlan {
                 context,
                 sensor,
                 weight_total,
                 levels,
                 dwells,
+                early,
             },
         )
 }
@@ -630,6 +635,18 @@ fn realize(plan: &Plan) -> (Config, Vec<Step>, Vec<f64>) {
         for (term, (_, t)) in e.sensor.iter_mut().zip(&ep.sensor) {
             term.cdf = cdf_for(t, &st[slot(t)], delta[slot(t)]);
         }
+        // An early dwell a third of the confirm dwell (never half a tick, where the model's
+        // rounding of a time to ticks and the compiler's may differ), at a level within
+        // the feature's range.
+        if let (Some(fraction), Some((_, t))) = (ep.early, ep.sensor.first()) {
+            let s = &st[slot(t)];
+            let above = s.min + (s.max - s.min) * f64::from(fraction) / 65536.0;
+            e.confirm.early = Some(EarlySpec {
+                feature: format!("f{}", usize::from(t.feature) % feature_count),
+                above: above as f32,
+                dwell_ms: e.confirm.dwell_ms / 3.0,
+            });
+        }
     }
 
     let steps = (0..TICKS)
@@ -762,8 +779,17 @@ proptest! {
             }
             let now = t as u32;
             let out = det.tick(&mut st, now, &inputs(&step.samples, step.faults));
-            let confidences: Vec<f64> = out.confidences.iter().map(|c| c.to_f64()).collect();
-            let d = model.decide(&mut ms, now, &confidences, out.evaluated, out.unjudgeable);
+            let judgement = Judgement {
+                confidences: out.confidences.iter().map(|c| c.to_f64()).collect(),
+                evaluated: out.evaluated,
+                unjudgeable: out.unjudgeable,
+                degraded: out.degraded,
+                ..Judgement::default()
+            };
+            let features: Vec<f64> = (0..config.features.len())
+                .map(|k| st.feature(k).map_or(0.0, Signal::to_f64))
+                .collect();
+            let d = model.decide(&mut ms, now, &judgement, &features);
             let engine: Vec<(usize, &str, u16, u32, u32)> = out
                 .decisions
                 .iter()

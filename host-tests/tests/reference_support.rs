@@ -20,6 +20,7 @@ pub fn level(on: f32, off: f32, dwell_ms: f32) -> LevelSpec {
         off,
         dwell_ms,
         hold_ms: 0.0,
+        early: None,
     }
 }
 
