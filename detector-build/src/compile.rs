@@ -371,22 +371,14 @@ impl Compiled {
         let item = || Item::Event(e.name.clone());
         at_most("context term", e.context.len(), MAX_TERMS, item())?;
         at_most("sensor term", e.sensor.len(), MAX_TERMS, item())?;
-        let mut event = Event {
-            name: core_name(&e.name),
-            context: Vec::new(),
-            sensor: Vec::new(),
-            context_channels: 0,
-            sensor_channels: 0,
-            levels: [LevelParams::checked(1, 0, 1, 1, None); 2],
-            onset_level: 0,
-            excluded_by: 0,
-        };
+        let (mut context, mut context_channels) = (Vec::new(), 0);
         for t in &e.context {
             let item = Item::ContextTerm(e.name.clone(), t.feature.clone());
             let (k, channels) = self.psi(config, &t.feature, &t.cdf, item, i)?;
-            event.context_channels |= channels;
-            event.context.push(k);
+            context_channels |= channels;
+            context.push(k);
         }
+        let (mut sensor, mut sensor_channels) = (Vec::new(), 0);
         let mut total = 0.0f32;
         let mut total_q15 = 0u32;
         for t in &e.sensor {
@@ -395,10 +387,10 @@ impl Compiled {
                 return err(item, Problem::Weight(t.weight));
             };
             let (k, channels) = self.psi(config, &t.feature, &t.cdf, item, i)?;
-            event.sensor_channels |= channels;
+            sensor_channels |= channels;
             total += t.weight;
             total_q15 += u32::from(weight.to_bits());
-            event.sensor.push(Weighted {
+            sensor.push(Weighted {
                 psi: k,
                 weight: weight.to_bits(),
             });
@@ -408,17 +400,25 @@ impl Compiled {
         if total > 3.0 + 1e-5 || total_q15 > detector_core::MAX_WEIGHT_SUM_Q15 {
             return err(Item::Event(e.name.clone()), Problem::WeightSum(total));
         }
-        let reads = event.context_channels | event.sensor_channels;
-        let early = [("alert", &e.alert), ("confirm", &e.confirm)].map(|(name, l)| {
-            l.early
-                .as_ref()
-                .map(|spec| self.early(config, spec, Item::Level(e.name.clone(), name), reads))
+        let reads = context_channels | sensor_channels;
+        let early = |name, level: &LevelSpec| {
+            let item = Item::Level(e.name.clone(), name);
+            let spec = level.early.as_ref();
+            spec.map(|spec| self.early(config, spec, item, reads))
                 .transpose()
+        };
+        let early = [early("alert", &e.alert)?, early("confirm", &e.confirm)?];
+        let levels = event_levels(e, self.rate_hz, early)?;
+        self.events.push(Event {
+            name: core_name(&e.name),
+            context,
+            sensor,
+            context_channels,
+            sensor_channels,
+            levels,
+            onset_level: onset_level(e, levels[0].on())?,
+            excluded_by: 0,
         });
-        let [alert_early, confirm_early] = early;
-        event.levels = event_levels(e, self.rate_hz, [alert_early?, confirm_early?])?;
-        event.onset_level = onset_level(e, event.levels[0].on())?;
-        self.events.push(event);
         Ok(())
     }
 
