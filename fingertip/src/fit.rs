@@ -1413,6 +1413,38 @@ mod tests {
         );
     }
 
+    /// A confirm level's early dwell keeps its feature and level on every candidate, its
+    /// dwell capped at the candidate's, and is written back with the level.
+    #[test]
+    fn an_early_dwell_is_kept_capped_and_written() {
+        let config = Config::from_toml(crate::APPROACH_TOML).expect("the default is valid");
+        let disturbance = config
+            .events
+            .iter()
+            .find(|e| e.name == "disturbance")
+            .expect("the default's disturbance");
+        let early = disturbance.confirm.early.clone().expect("an early dwell");
+        for (dwell_ms, want) in [(3.0, 3.0), (10.0, early.dwell_ms)] {
+            let fitted = with_levels(disturbance, 0.8, dwell_ms);
+            let kept = fitted.confirm.early.expect("kept");
+            assert_eq!(kept.feature, early.feature);
+            assert_eq!(
+                (kept.above, kept.dwell_ms),
+                (early.above, want),
+                "dwell {dwell_ms}"
+            );
+        }
+        let line = crate::APPROACH_TOML
+            .lines()
+            .find(|l| l.starts_with("confirm = ") && l.contains("early"))
+            .expect("the disturbance's confirm level on one line");
+        let written = format!("confirm = {}", level_table(&disturbance.confirm));
+        let reread = Config::from_toml(&crate::APPROACH_TOML.replacen(line, &written, 1))
+            .expect("the written level reads back");
+        let reread = reread.events.iter().find(|e| e.name == "disturbance");
+        assert_eq!(reread.map(|e| &e.confirm), Some(&disturbance.confirm));
+    }
+
     #[test]
     fn weights_are_shared_and_capped_at_one() {
         let close = |a: &[f64], b: &[f64]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-12);
