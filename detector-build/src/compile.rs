@@ -444,13 +444,12 @@ impl Compiled {
                 .unwrap_or_default();
             return err(item, Problem::EarlyChannel(spec.feature.clone(), channel));
         }
-        if !(spec.above.is_finite() && spec.above.abs() < 32768.0) {
+        let Some(above) = detector_core::Signal::parameter(spec.above) else {
             return err(item, Problem::EarlyLevel(spec.above));
-        }
-        let above = detector_core::Signal::from_f32(spec.above).to_bits();
+        };
         let dwell = ticks_of(&item, "early.dwell_ms", spec.dwell_ms, self.rate_hz)?;
         // A feature's slot and a dwell of at least one tick: always an early dwell.
-        Early::new(slot as u8, above, dwell).ok_or(ConfigError {
+        Early::new(slot as u8, above.to_bits(), dwell).ok_or(ConfigError {
             item,
             problem: Problem::Time {
                 param: "early.dwell_ms",

@@ -1689,10 +1689,9 @@ fn warm_up_samples(rate_hz: f32, warm_up_ms: Option<f32>) -> Result<u16, StageEr
     Ok(samples.clamp(1, WARM_LIMIT - 1))
 }
 
-/// A parameter in Q16.16, as a [`Signal`](crate::Signal) converts it, when it is finite
-/// and below 32768 in magnitude.
+/// A parameter in Q16.16 ([`Signal::parameter`](crate::Signal::parameter)).
 fn q16(v: f32) -> Option<i32> {
-    (v.is_finite() && v.abs() < 32768.0).then(|| crate::Signal::from_f32(v).to_bits())
+    crate::Signal::parameter(v).map(crate::Signal::to_bits)
 }
 
 /// A level a low-pass's warm-up or a gate watches, in Q16.16.

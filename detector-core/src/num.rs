@@ -45,6 +45,12 @@ impl Signal {
         Signal(I16F16::saturating_from_num(v).to_bits())
     }
 
+    /// A configuration's parameter in a feature's unit, as the detector holds it: the
+    /// nearest value when it is finite and below 32768 in magnitude, `None` otherwise.
+    pub fn parameter(v: f32) -> Option<Signal> {
+        (v.is_finite() && v.abs() < 32768.0).then(|| Signal::from_f32(v))
+    }
+
     /// From an `f64`, rounding to nearest (ties to even) and saturating; NaN gives zero.
     ///
     /// The PC tools convert every sample of a recording through here, so it is written

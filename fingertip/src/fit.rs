@@ -552,8 +552,17 @@ impl Recorded {
         let mut kept: Vec<(Vec<(u32, Judged)>, u32)> = vec![(Vec::new(), 0); detectors.len()];
         let reader = TraceReader::open(file).map_err(StreamError::from)?;
         let name = reader.name().to_string();
+        // Each detector's confirm levels, whose early dwells the ticks record as shown.
+        let confirms: Vec<Vec<LevelParams>> = detectors
+            .iter()
+            .map(|d| {
+                (0..d.events().len())
+                    .filter_map(|e| d.event_levels(EventId(e as u8)).map(|l| l[1]))
+                    .collect()
+            })
+            .collect();
         let streamed = replay_stream_each(detectors, reader, |d, tick| {
-            let (Some(detector), Some((ticks, gap))) = (detectors.get(d), kept.get_mut(d)) else {
+            let (Some(confirm), Some((ticks, gap))) = (confirms.get(d), kept.get_mut(d)) else {
                 return;
             };
             let out = tick.output;
@@ -565,13 +574,11 @@ impl Recorded {
                 confidences: [0; detector_core::MAX_EVENTS],
                 shown: 0,
             };
-            let events = detector.events().len();
-            for (e, q) in judged.confidences.iter_mut().enumerate().take(events) {
+            for (e, (q, level)) in judged.confidences.iter_mut().zip(confirm).enumerate() {
                 let bit = 1 << e;
                 if judged.judged & bit != 0 {
                     *q = out.confidences[e].to_bits();
-                    let confirm = detector.event_levels(EventId(e as u8)).map(|l| l[1]);
-                    if confirm.is_some_and(|l| l.shown(tick.state, out.degraded & bit != 0)) {
+                    if level.shown(tick.state, out.degraded & bit != 0) {
                         judged.shown |= bit;
                     }
                 }
