@@ -28,9 +28,9 @@ const KEPT: &str = "{ feature = \"creep_kept\", weight = 1.0,";
 /// The growth unsmoothed.
 const UNSMOOTHED: &str = "{ feature = \"creep_steady\", weight = 1.0,";
 /// The default's gate of the slow path on the arm's fast pushes off its path.
-const PUSH_GATE: &str = "unless = { feature = \"lag_memory\", above = 15.0 }";
+const PUSH_GATE: &str = "unless = { feature = \"lag\", above = 15.0 }";
 /// The same gate at a level no push reaches.
-const NO_PUSH_GATE: &str = "unless = { feature = \"lag_memory\", above = 30000.0 }";
+const NO_PUSH_GATE: &str = "unless = { feature = \"lag\", above = 30000.0 }";
 /// The default's gate of the slow path on the commanded speed's changes.
 const SPEED_GATE: &str =
     "input = \"creep_unpushed\", unless = { feature = \"speed_unsettled\", above = 0.5 }";

@@ -25,12 +25,6 @@ use support::{
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
 const FORCE_TERM: &str = "    { feature = \"force_push_still\", weight = 1.0, cdf = { sigmoid = { low = 1.0, high = 2.5 } } },\n";
-/// The default's gate of that term on the arm held back.
-const HELD_GATE: &str =
-    "input = \"force_push_clear\", unless = { feature = \"lag\", above = 1.99 }";
-/// The same gate at a level no lag reaches.
-const NO_HELD_GATE: &str =
-    "input = \"force_push_clear\", unless = { feature = \"lag\", above = 30000.0 }";
 
 /// The seeds of the runs in `right` that were not right.
 fn wrong(seeds: std::ops::Range<u64>, right: &[bool]) -> Vec<u64> {
@@ -209,8 +203,10 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
 
 /// Link collisions at 8 cm/s of the tuning seeds (base seed 100, run seeds as `fingertip
 /// evaluate` names them) on an arm whose loops take their velocity from the encoders
-/// through a 250 Hz low-pass: each stopped its fingertip hard enough that, without the
-/// gate, the force sensor's push confirmed a contact 4-11 ms after the strike.
+/// through a 250 Hz low-pass: each stopped its fingertip hard enough that its own inertia
+/// pushed it onto its force sensor as a soft object's load does. Each blocks joint 1 with
+/// the pad turned towards it, so that the tip moves ahead along the approach as the arm
+/// stops, which the swing gate reads as the arm catching up.
 const STOPPED_HARD: [(Scenario, u64); 4] = [
     (Scenario::LinkCollision8, 14_820_092_336_525_572_267),
     (Scenario::LinkCollision8, 14_820_092_336_525_572_612),
@@ -231,7 +227,7 @@ fn contacts_at_250_hz_without(gate: &str, open: &str, picked: &[(Scenario, u64)]
 
 #[test]
 fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
-    let read_as_contacts = contacts_at_250_hz_without(HELD_GATE, NO_HELD_GATE, &STOPPED_HARD);
+    let read_as_contacts = contacts_at_250_hz_without(SWING_GATE, NO_SWING_GATE, &STOPPED_HARD);
     assert!(
         read_as_contacts >= 3,
         "without the gate, only {read_as_contacts} of the {} collisions confirm a contact: the test no longer shows the gate's part",
@@ -240,9 +236,9 @@ fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
 }
 
 /// The default's gate of the force sensor's path on the arm's swings back onto its path.
-const SWING_GATE: &str = "stage = { gate = { input = \"force_push_free\", unless = { feature = \"err_shake\", above = 0.3 } } }";
+const SWING_GATE: &str = "stage = { gate = { input = \"force_push_clear\", unless = { feature = \"err_shake\", above = 0.3 } } }";
 /// The same gate at a level no swing reaches.
-const NO_SWING_GATE: &str = "stage = { gate = { input = \"force_push_free\", unless = { feature = \"err_shake\", above = 30000.0 } } }";
+const NO_SWING_GATE: &str = "stage = { gate = { input = \"force_push_clear\", unless = { feature = \"err_shake\", above = 30000.0 } } }";
 
 /// Knocks and large disturbances of the tuning seeds (base seed 100, run seeds as
 /// `fingertip evaluate` names them) on an arm whose loops take their velocity from the
