@@ -13,14 +13,13 @@
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::score::Outcome;
 use fingertip::sim::{self, Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, outcomes,
-    right, runs, times, trace_of,
+    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, right,
+    right_within, runs, times, trace_of,
 };
 
 /// The default's force-sensor contact term, as written in `configs/approach.toml`.
@@ -94,12 +93,7 @@ fn a_braking_finger_finds_soft_objects_on_its_film() {
         .collect();
     assert!(soft.len() >= 30, "{} runs on soft objects", soft.len());
     // Found within the paper's 20 ms.
-    let late = |d: &Detector| {
-        outcomes(d, s, &soft)
-            .iter()
-            .filter(|o| !matches!(o, Outcome::Correct { latency_s } if *latency_s <= 0.020))
-            .count()
-    };
+    let late = |d: &Detector| soft.len() - right_within(d, s, &soft, 0.020);
     assert_eq!(late(&default), 0, "the default finds braking contacts late");
     assert!(
         late(&any_direction) > 0,

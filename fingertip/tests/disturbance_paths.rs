@@ -17,14 +17,13 @@
 
 use detector_core::Detector;
 use fingertip::APPROACH_TOML;
-use fingertip::score::Outcome;
 use fingertip::sim::{Scenario, SimOptions};
 use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, outcomes,
-    right, runs, steady_motion, times, trace_of,
+    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, right,
+    right_within, runs, steady_motion, times, trace_of,
 };
 
 /// The default's encoder term, as written in `configs/approach.toml`.
@@ -318,14 +317,6 @@ const SWINGING_BURSTS: [u64; 6] = [
     14_820_112_127_734_872_835,
     14_820_112_127_734_873_041,
 ];
-
-/// How many of `traces` (runs of `s`) `detector` gets right within `within_s` of the onset.
-fn right_within(detector: &Detector, s: Scenario, traces: &[Trace], within_s: f64) -> usize {
-    outcomes(detector, s, traces)
-        .iter()
-        .filter(|o| matches!(o, Outcome::Correct { latency_s } if *latency_s <= within_s))
-        .count()
-}
 
 #[test]
 fn a_burst_that_shakes_the_arm_is_confirmed_while_it_lasts() {

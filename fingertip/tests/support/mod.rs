@@ -102,6 +102,14 @@ pub fn outcomes(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<Outco
         .collect()
 }
 
+/// How many of `traces` (runs of `s`) `detector` gets right within `within_s` of the onset.
+pub fn right_within(detector: &Detector, s: Scenario, traces: &[Trace], within_s: f64) -> usize {
+    outcomes(detector, s, traces)
+        .iter()
+        .filter(|o| matches!(o, Outcome::Correct { latency_s } if *latency_s <= within_s))
+        .count()
+}
+
 /// The events `detector` confirms on `trace`, in order.
 pub fn confirmed(detector: &Detector, trace: &Trace) -> Vec<String> {
     replay(detector, trace, |_, _, _| {})
