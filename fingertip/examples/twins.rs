@@ -17,6 +17,11 @@
 //!   `knock`), a half-sine there where the blow has the event's shape; for a link, how
 //!   many are taps of the force a separately written model strikes a link with (5-15 N
 //!   and 50-200 N; counted here as 5-200 N);
+//! - for a link, how many blows are the first push of a vibration burst of the envelope's
+//!   40-150 Hz (half a period: 3.3-12.5 ms) with the amplitude of that model's bursts on
+//!   a link (small ones 1-5 N, large ones 10-40 N; counted here as 1-40 N), and how many
+//!   of these have a large one's: the push of a burst whose waveform has the collision's
+//!   shape, which until it turns to pull is the collision bit for bit;
 //! - what the default detector confirms on the blow, and on how many of the events it
 //!   confirmed the event before the readings part (it then confirms it on the blow).
 
@@ -31,7 +36,8 @@ use fingertip::trace::Trace;
 use rayon::prelude::*;
 
 /// How long after the first touch the obstacle or the object gives way (ms).
-const GIVE_WAY_MS: [f64; 6] = [0.5, 1.0, 2.0, 3.0, 5.0, 10.0];
+/// Besides the taps' lengths, the half periods of bursts at 150, 100, 50 and 40 Hz.
+const GIVE_WAY_MS: [f64; 8] = [0.5, 1.0, 2.0, 3.0, 1000.0 / 300.0, 5.0, 10.0, 12.5];
 
 /// The envelope's taps: peak force (N) and length (s), on any body.
 const TAP_PEAK_N: (f64, f64) = (1.0, 15.0);
@@ -39,6 +45,13 @@ const TAP_PEAK_N: (f64, f64) = (1.0, 15.0);
 /// small ones 5-15 N and its large ones 50-200 N (docs/simulator.md, the third model).
 const OTHER_TAP_PEAK_N: (f64, f64) = (5.0, 200.0);
 const TAP_LENGTH_S: (f64, f64) = (0.0005, 0.003);
+/// The first push of a burst of the envelope's 40-150 Hz lasts half a period (s), widened
+/// by a microsecond so that the half periods of 150 and 40 Hz, as computed, count.
+const BURST_PUSH_S: (f64, f64) = (1.0 / 300.0 - 1e-6, 1.0 / 80.0 + 1e-6);
+/// The amplitude of the bursts the separately written model strikes a link with (N): its
+/// small ones 1-5 N and its large ones 10-40 N (docs/simulator.md, the third model), and
+/// the large ones alone.
+const OTHER_BURST_PEAK_N: [(f64, f64); 2] = [(1.0, 40.0), (10.0, 40.0)];
 
 /// The first confirmation and its time (s), if any.
 fn first_confirmation(decisions: &[DecisionRecord]) -> Option<(&str, f64)> {
@@ -58,6 +71,9 @@ struct Pair {
     tap_sized: bool,
     /// The same with the peak force of the other model's taps on a link.
     other_tap_sized: bool,
+    /// On a link, the blow is the first push of a burst of the envelope's frequencies with
+    /// the amplitude of the other model's bursts on a link, and of its large ones.
+    other_burst_sized: [bool; 2],
     /// The event the detector confirms first on the blow.
     on_blow: Option<String>,
     /// The detector confirmed the event before the readings parted.
@@ -118,6 +134,7 @@ impl Event {
         let on_link = s.expected() == Some(sim::LINK_COLLISION);
         let freed = replay::replay(detector, &blow, |_, _, _| {}).ok()?;
         let tap_length = (TAP_LENGTH_S.0..=TAP_LENGTH_S.1).contains(&g_s);
+        let burst_push = on_link && (BURST_PUSH_S.0..=BURST_PUSH_S.1).contains(&g_s);
         Some(Pair {
             identical_s: parted_s - self.onset_s,
             peak_n: peak,
@@ -125,6 +142,8 @@ impl Event {
             other_tap_sized: on_link
                 && tap_length
                 && (OTHER_TAP_PEAK_N.0..=OTHER_TAP_PEAK_N.1).contains(&peak),
+            other_burst_sized: OTHER_BURST_PEAK_N
+                .map(|(low, high)| burst_push && (low..=high).contains(&peak)),
             on_blow: first_confirmation(&freed).map(|(e, _)| e.to_string()),
             event_before_parting: self.confirmed_s.is_some_and(|t| t < parted_s),
         })
@@ -177,7 +196,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             base + runs - 1
         );
         println!(
-            "  gives way | identical for [ms]: min / median | the blow's peak [N]: median / 99 % / max | tap-sized blows: the envelope's, the other model's | the default on the blow: {} / disturbance / another / nothing | events it confirmed before the readings part",
+            "  gives way | identical for [ms]: min / median | the blow's peak [N]: median / 99 % / max | tap-sized blows: the envelope's, the other model's | burst pushes of the other model's bursts on a link: all / large | the default on the blow: {} / disturbance / another / nothing | events it confirmed before the readings part",
             s.expected().unwrap_or("-")
         );
         for (i, g) in GIVE_WAY_MS.iter().enumerate() {
@@ -188,12 +207,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let on = |e: Option<&str>| count(&|p: &Pair| p.on_blow.as_deref() == e);
             let tap_sized = count(&|p: &Pair| p.tap_sized);
             let other_tap_sized = count(&|p: &Pair| p.other_tap_sized);
+            let [burst, large_burst] = [0, 1].map(|k| count(&|p: &Pair| p.other_burst_sized[k]));
             let (event, disturbance, nothing) =
                 (on(s.expected()), on(Some(sim::DISTURBANCE)), on(None));
             let mut peaks: Vec<f64> = at.iter().map(|p| p.peak_n).collect();
             peaks.sort_by(f64::total_cmp);
             println!(
-                "  {g:>6} ms | {shortest:>5.1} / {:>4.1} | {:>5.1} / {:>5.1} / {:>5.1} | {tap_sized:>4} ({:>4.1} %), {other_tap_sized:>4} | {event:>4} / {disturbance:>4} / {:>4} / {nothing:>4} | {:>4}",
+                "  {g:>6.2} ms | {shortest:>5.1} / {:>4.1} | {:>5.1} / {:>5.1} / {:>5.1} | {tap_sized:>4} ({:>4.1} %), {other_tap_sized:>4} | {burst:>4} / {large_burst:>4} | {event:>4} / {disturbance:>4} / {:>4} / {nothing:>4} | {:>4}",
                 Latency::from_seconds(&identical).median,
                 nearest_rank(&peaks, 0.5),
                 nearest_rank(&peaks, 0.99),
