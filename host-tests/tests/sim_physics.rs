@@ -860,8 +860,8 @@ fn padded_tip_rings_at_its_suspension_mode() {
 
 /// An obstacle or an object that gives way is the collision's or the contact's twin: every
 /// channel reads the same, bit for bit, until it gives way (after a tap's 2 ms or a 40 Hz
-/// burst's 12.5 ms push), then the freed finger reads otherwise within a millisecond; the trace records how long it held and how hard it
-/// pushed. It is refused outside 0 to 1 s.
+/// burst's 12.5 ms push), then the freed finger reads otherwise within a millisecond; the
+/// trace records how long it held and how hard it pushed. It is refused outside 0 to 1 s.
 #[test]
 fn an_obstacle_or_an_object_that_gives_way_is_the_event_until_then() {
     for (s, seed) in [
@@ -877,10 +877,10 @@ fn an_obstacle_or_an_object_that_gives_way_is_the_event_until_then() {
             gives_way_s: Some(after),
             ..SimOptions::default()
         };
+        let on = onset_row(&held);
         // A tap's length, and the first push of a 40 Hz burst.
         for (after, text) in [(0.002, "0.002"), (0.0125, "0.0125")] {
             let freed = sim::simulate(&s, &opts(after)).expect("valid options");
-            let on = onset_row(&held);
             let until = on + (after * 1000.0 * MS as f64) as usize;
             let differs = |k: usize| {
                 sim::CHANNELS
