@@ -10,7 +10,7 @@ use heapless::Vec;
 
 use crate::Name;
 use crate::cdf::Cdf;
-use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL, taps_valid};
+use crate::feature::{MAX_SLOTS, Stage, StageState, WINDOW_POOL, taps_valid, windows_disjoint};
 use crate::image::{ImageError, Reader, Section};
 use crate::num::{ChannelMask, Confidence, EventMask, Signal, Tick};
 use crate::state::{
@@ -233,6 +233,9 @@ impl Detector {
             let _ = self.feature_names.push(r.name()?);
             // A feature reads channels and the features declared before it.
             let _ = self.stages.push(Stage::read_image(r, MAX_CHANNELS + k)?);
+        }
+        if !windows_disjoint(&self.stages) {
+            return Err(ImageError::Invalid("window placement"));
         }
         Ok(())
     }

@@ -727,32 +727,39 @@ impl StageState {
 impl Stage {
     /// Whether `st`, with the stage's share of the window history `ring`, is a state
     /// this stage can have reached: a filter's output within `i32`, a window's position
-    /// inside it, its running sum and entries within what its inputs make. A state
-    /// read from outside (a recording) is held to this before a tick runs on it, so
-    /// that no arithmetic of the tick can overflow.
+    /// inside it, its entries within what its inputs make and its running sum exactly
+    /// theirs (of those that have arrived, until it has filled). A state read from
+    /// outside (a recording) is held to this before a tick runs on it, so that no
+    /// arithmetic of the tick can overflow.
     pub(crate) fn admits(&self, st: &StageState, ring: &[u64; WINDOW_POOL]) -> bool {
+        // The entries the running sum holds, with the window's: `None` for a position
+        // outside the window.
         let window = |offset: u16, len: u16| {
             let start = usize::from(offset);
-            ring.get(start..start + usize::from(len))
-                .filter(|_| st.pos < len)
+            let held = if st.primed { len } else { st.pos };
+            let all = ring.get(start..start + usize::from(len))?;
+            (st.pos < len).then(|| (&all[..usize::from(held)], all))
         };
         match self.0 {
             StageKind::LowPass { .. }
             | StageKind::Envelope { .. }
             | StageKind::HighPass { .. }
             | StageKind::Cancel { .. } => st.acc & 1 == 0,
-            StageKind::Mean { offset, len, .. } => {
-                let limit = i64::from(len) << 31;
-                window(offset, len).is_some_and(|h| {
-                    st.acc.unsigned_abs() <= limit as u64
-                        && h.iter().all(|&e| i32::try_from(e as i64).is_ok())
-                })
-            }
-            StageKind::Ste { offset, len, .. } => {
+            StageKind::Mean { offset, len, .. } => window(offset, len).is_some_and(|(held, h)| {
+                h.iter().all(|&e| i32::try_from(e as i64).is_ok())
+                    && held.iter().map(|&e| e as i64).sum::<i64>() == st.acc
+            }),
+            StageKind::Ste {
+                offset,
+                len,
+                tapered,
+                ..
+            } => {
                 let square_limit = ((STE_INPUT_LIMIT * STE_INPUT_LIMIT) >> 16) as u64;
-                window(offset, len).is_some_and(|h| {
-                    (0..=i64::from(len) << 38).contains(&st.acc)
-                        && h.iter().all(|&e| e <= square_limit)
+                window(offset, len).is_some_and(|(held, h)| {
+                    // A tapered window weighs its entries afresh each tick: no sum to keep.
+                    h.iter().all(|&e| e <= square_limit)
+                        && (tapered || held.iter().sum::<u64>() == st.acc as u64 && st.acc >= 0)
                 })
             }
             StageKind::Raw(_)
@@ -1029,7 +1036,12 @@ impl Stage {
                 out
             }
             StageKind::Difference { a, b, gain } => {
-                sat32(i64::from(get(a)) - scale_q16(get(b), gain))
+                if gain == 1 << 16 {
+                    // Generated code knows a unit gain: one saturating subtraction.
+                    get(a).saturating_sub(get(b))
+                } else {
+                    sat32(i64::from(get(a)) - scale_q16(get(b), gain))
+                }
             }
             StageKind::Dot([ax, ay, bx, by]) => {
                 let p = i64::from(get(ax)) * i64::from(get(bx));
@@ -1049,12 +1061,11 @@ impl Stage {
             } => {
                 let x = i64::from(get(input));
                 let oldest = push_window(st, ring, offset, len, x as u64) as i64;
-                // Exact: what enters now leaves N ticks later; |sum| ≤ N · 2^31 ≤ 2^38.
+                // Exact: what enters now leaves N ticks later, so the sum is the window's
+                // (a loaded detector's windows are disjoint, a restored state's sums exact):
+                // |sum| ≤ N · 2^31 ≤ 2^38, and with recip ≤ 2^24 / N the product is below 2^56.
                 st.acc += x - oldest;
-                // The clamp only matters for a detector loaded from a corrupt image whose
-                // windows overlap: it keeps the product below 2^62.
-                let sum = st.acc.clamp(-(i64::from(len) << 31), i64::from(len) << 31);
-                sat32((sum * i64::from(filled_recip(st, len, recip))) >> 24)
+                sat32((st.acc * i64::from(filled_recip(st, len, recip))) >> 24)
             }
             StageKind::Ste {
                 input,
@@ -1092,12 +1103,10 @@ impl Stage {
                         .sum();
                     (acc >> 24).min(i32::MAX as u64) as i32
                 } else {
-                    // Exact: what enters now leaves N ticks later. sum ≤ N · 2^38 and
-                    // recip ≤ 2^24 / n keep the product below 2^63.
+                    // Exact, as for a mean: 0 ≤ sum ≤ N · 2^38, and recip ≤ 2^24 / n keeps
+                    // the product below 2^63.
                     st.acc += sq as i64 - oldest as i64;
-                    // The clamp only matters for a detector loaded from a corrupt image
-                    // whose windows overlap: it keeps the product in range.
-                    let sum = (st.acc.max(0) as u64).min(u64::from(len) << 38);
+                    let sum = st.acc as u64;
                     let recip = filled_recip(st, len, recip);
                     ((sum * u64::from(recip)) >> 24).min(i32::MAX as u64) as i32
                 }
@@ -1637,6 +1646,29 @@ impl Stage {
     }
 }
 
+/// Whether the stages' windows share no entry of the history pool, as [`Stage::compile`]
+/// lays them out: each window's running sum then holds exactly its own entries, which keeps
+/// every sum, and its product with the window's reciprocal, in range.
+pub(crate) fn windows_disjoint(stages: &[Stage]) -> bool {
+    let mut taken = [0u32; WINDOW_POOL / 32];
+    stages.iter().all(|stage| {
+        let (StageKind::Mean { offset, len, .. } | StageKind::Ste { offset, len, .. }) = stage.0
+        else {
+            return true;
+        };
+        (usize::from(offset)..usize::from(offset) + usize::from(len)).all(|i| {
+            // `invalid` holds every window inside the pool.
+            let Some(word) = taken.get_mut(i / 32) else {
+                return false;
+            };
+            let bit = 1 << (i % 32);
+            let free = *word & bit == 0;
+            *word |= bit;
+            free
+        })
+    })
+}
+
 /// Whether a stage's window taps in `weights` are what [`Stage::compile`] makes: a
 /// tapered window's sum exactly 2²⁴, which keeps its weighted sum in 64 bits.
 pub(crate) fn taps_valid(stage: &Stage, weights: &[u32; WINDOW_POOL]) -> bool {
@@ -1786,10 +1818,18 @@ fn scale_q16(x: i32, gain: i32) -> i64 {
     i64::from(x) * whole + ((i64::from(x) * fraction) >> 16)
 }
 
-/// Saturates to the `i32` range.
-#[inline]
+/// Saturates to the `i32` range. The test is whether the upper word is the lower word's sign
+/// (one `teq` on the chip, where a clamp compares both ends as 64-bit numbers), and a value
+/// out of range takes its bound from its sign: `MAX ^ (v >> 63)` is `MAX` for a positive one
+/// and `MIN` for a negative one.
+#[inline(always)]
 fn sat32(v: i64) -> i32 {
-    v.clamp(i32::MIN.into(), i32::MAX.into()) as i32
+    let low = v as i32;
+    if i64::from(low) == v {
+        low
+    } else {
+        i32::MAX ^ (v >> 63) as i32
+    }
 }
 
 /// Fills `taps` with a symmetric triangular window in Q24 summing to exactly 2²⁴.

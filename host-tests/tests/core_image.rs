@@ -144,6 +144,45 @@ fn out_of_range_values_are_named() {
     );
 }
 
+#[test]
+fn windows_that_share_history_are_refused() {
+    // The default's two 100-sample means follow its 24-sample STE in the history pool:
+    // `accel_mean` at 124 (its offset, length and 2^24 / 100 as the image writes them).
+    let image = approach_image();
+    let recip = ((1u32 << 24) + 50) / 100;
+    let at_124: Vec<u8> = [
+        &124u16.to_le_bytes()[..],
+        &100u16.to_le_bytes(),
+        &recip.to_le_bytes(),
+    ]
+    .concat();
+    let found: Vec<usize> = image
+        .windows(at_124.len())
+        .enumerate()
+        .filter(|(_, w)| *w == at_124.as_slice())
+        .map(|(i, _)| i)
+        .collect();
+    assert_eq!(found.len(), 1, "the window found once in the image");
+    let mut d = Detector::empty();
+    // Moved back onto `stress_mean`'s last 24 entries, or just past them.
+    for (offset, expected) in [
+        (100u16, Err(ImageError::Invalid("window placement"))),
+        (123, Err(ImageError::Invalid("window placement"))),
+        (156, Ok(())),
+    ] {
+        let mut moved = image.clone();
+        moved[found[0]..found[0] + 2].copy_from_slice(&offset.to_le_bytes());
+        assert_eq!(d.load_image(&moved), expected, "accel_mean at {offset}");
+        if expected.is_err() {
+            assert_eq!(
+                d,
+                Detector::empty(),
+                "a rejected image left something behind"
+            );
+        }
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 4096, ..ProptestConfig::default() })]
 

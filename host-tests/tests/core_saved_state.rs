@@ -108,6 +108,15 @@ fn saved_bytes_that_are_not_a_reachable_state_are_refused_naming_why() {
     };
     let envelope = feature("motion_ring");
     let mean = feature("stress_mean");
+    let ste = feature("ste_force");
+    // A running sum one step off the window's entries, all of them within range.
+    let sum_off_by_one = |k: usize| {
+        let mut b = good.clone();
+        let at = STAGES + STAGE_BYTES * k;
+        let sum = i64::from_le_bytes(b[at..at + 8].try_into().expect("8 bytes"));
+        b[at..at + 8].copy_from_slice(&(sum + 1).to_le_bytes());
+        (b, StateError::Feature(k))
+    };
     let cases: Vec<(Vec<u8>, StateError)> = vec![
         (good[..100].to_vec(), StateError::Length(100)),
         (
@@ -157,6 +166,8 @@ fn saved_bytes_that_are_not_a_reachable_state_are_refused_naming_why() {
             },
             StateError::Feature(mean),
         ),
+        sum_off_by_one(mean),
+        sum_off_by_one(ste),
     ];
     for (bytes, expected) in cases {
         assert_eq!(detector.restore(&bytes), Err(expected));

@@ -824,8 +824,8 @@ fn qemu_instructions_per_tick_within_the_budget() {
     let tick = first.insns.get("tick").expect("tick counts");
     if tick.max > AIM {
         println!(
-            "note: the worst tick ({}) is above the aim of {AIM}",
-            tick.max
+            "note: the worst tick ({}, at segment:record {}) is above the aim of {AIM}",
+            tick.max, tick.max_at
         );
     }
     check_budget(&first).expect("instruction budget");
