@@ -24,12 +24,20 @@ use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    confirmed, confirmed_at, confirming_where_right, default_with, detector, force_noise, right,
-    right_within, runs, steady_motion, times, trace_of,
+    STIFF_OBSTACLES, confirmed, confirmed_at, confirming_where_right, default_with, detector,
+    force_noise, right, right_within, runs, steady_motion, times, trace_of,
 };
 
 /// The default's encoder term, as written in `configs/approach.toml`.
 const ENCODER_TERM: &str = "    { feature = \"err_shake_free\", weight = 1.0, cdf = { sigmoid = { low = 0.08, high = 0.45 } } },\n";
+/// Randomized runs against stiff obstacles ([`STIFF_OBSTACLES`]).
+fn stiff_obstacles() -> SimOptions {
+    SimOptions {
+        ranges: vec![STIFF_OBSTACLES.parse().expect("a range")],
+        ..SimOptions::default()
+    }
+}
+
 /// The same term on the swing back whether or not the tip is held off its path.
 const UNHELD_TERM: &str = "    { feature = \"err_shake_steady\", weight = 1.0, cdf = { sigmoid = { low = 0.08, high = 0.45 } } },\n";
 /// The swing's input: the error's growth above 30 Hz.
@@ -359,9 +367,9 @@ const STRUCK_GATE: &str =
 const NO_STRUCK_GATE: &str =
     "input = \"swing_excess\", unless = { feature = \"shake\", below = -30000.0 }";
 
-/// Link collisions (base seed 100) blocking joint 1 with the pad turned towards it: the tip
-/// catches up along the approach as the arm stops, which reads as a swing back, while the
-/// force sensor barely jumps.
+/// Link collisions (base seed 100; stiff obstacles, [`STIFF_OBSTACLES`]) blocking joint 1 with the pad
+/// turned towards it: the tip catches up along the approach as the arm stops, which reads
+/// as a swing back, while the force sensor barely jumps.
 const SWUNG_COLLISIONS: [(Scenario, u64); 7] = [
     (Scenario::LinkCollision8, 14_820_092_336_525_572_451),
     (Scenario::LinkCollision2, 14_820_084_639_944_177_693),
@@ -378,7 +386,7 @@ fn a_collision_swinging_its_arm_back_unstruck_is_no_disturbance() {
         STRUCK_GATE,
         NO_STRUCK_GATE,
         &SWUNG_COLLISIONS,
-        &SimOptions::default(),
+        &stiff_obstacles(),
         "disturbance",
     );
     // All 7 when this was written.
@@ -393,9 +401,10 @@ fn a_collision_swinging_its_arm_back_unstruck_is_no_disturbance() {
 const DISTURBANCE_CONFIRM: &str = "dwell_ms = 8.0, hold_ms = 150.0, early = { feature = \"err_back\", above = 3.0, dwell_ms = 5.0 } }";
 
 /// Link collisions of the tuning seeds (base seed 100, run seeds as `fingertip evaluate`
-/// names them) on arms of 1-4 kg, struck on link 2: the link rings the fingertip at once and
-/// the heavy arm's loss reaches the position error only after 5 ms. With the disturbance
-/// confirmed after a fixed 5 ms, each was read as a disturbance 4.9-5.1 ms after the onset.
+/// names them; stiff obstacles, [`STIFF_OBSTACLES`]) on arms of 1-4 kg, struck on link 2: the link
+/// rings the fingertip at once and the heavy arm's loss reaches the position error only
+/// after 5 ms. With the disturbance confirmed after a fixed 5 ms, each was read as a
+/// disturbance 4.9-5.1 ms after the onset.
 const HEAVY_COLLISIONS: [(Scenario, u64); 8] = [
     (Scenario::LinkCollision8, 14_820_092_336_525_572_149),
     (Scenario::LinkCollision8, 14_820_092_336_525_572_140),
@@ -410,7 +419,10 @@ const HEAVY_COLLISIONS: [(Scenario, u64); 8] = [
 #[test]
 fn a_heavy_arms_collision_is_given_the_disturbances_longer_wait() {
     let heavy = SimOptions {
-        ranges: vec!["plant.arm_mass=1..4".parse().expect("a range")],
+        ranges: vec![
+            "plant.arm_mass=1..4".parse().expect("a range"),
+            STIFF_OBSTACLES.parse().expect("a range"),
+        ],
         ..SimOptions::default()
     };
     let read_as_disturbances = confirming_where_right(

@@ -574,8 +574,9 @@ param_group! {
     /// or link 2 (the distal link, below the force sensor), equally likely in randomized
     /// runs.
     struct Obstacle, group "obstacle" {
-        /// Contact stiffness of link on obstacle.
-        stiffness: "N/m" = 1_000_000.0, [300_000.0, 2_000_000.0] log;
+        /// Contact stiffness of link on obstacle: from a padded post or a person's arm
+        /// (a few 10^3) to a rigid fixture.
+        stiffness: "N/m" = 1_000_000.0, [2_000.0, 2_000_000.0] log;
         /// Hunt-Crossley damping.
         damping: "s/m" = 10.0, [5.0, 20.0];
     }
