@@ -12,13 +12,18 @@
 //!   the contact's slow path judges (docs/simulator.md gives the film's event-free level);
 //!   and how far the force sensor is pushed back by then (N, the mean of its last 30 ms
 //!   below the mean before the onset), the signal of its force path. A detector that
-//!   confirms a contact within 60 ms has no more than these 60 ms to judge by.
+//!   confirms a contact within 60 ms has no more than these 60 ms to judge by;
+//! - link collisions at 2 cm/s: how far the tip moves off its path (µm, the position
+//!   error's largest distance from its mean over the 10 ms before the onset) in the 130 ms
+//!   after it, the window a run is scored in: a padded obstacle that the loops press into
+//!   takes a small share of a slow approach, and the arm's offset is the signal a detector
+//!   has of a collision below the force sensor.
 //!
 //! A detector can only find an event whose signal stands out of the sensors' own reading;
 //! where the right share falls with the signal, the misses are at the sensors' reach. For
 //! each scenario, the same measure is also taken where nothing happens: in each run started
-//! 100 ms sooner (the same plant, motion and sensors), over the same windows, which now end
-//! 40-50 ms before its event. Where an event's measure is below the largest of those, no
+//! 100 ms sooner (200 ms for a link collision; the same plant, motion and sensors), over
+//! the same windows, which now end 40-70 ms before its event. Where an event's measure is below the largest of those, no
 //! threshold on it finds the event without reading steady motion as that event about as
 //! often; the threshold that would find 99.5 % of the events is printed with the share of
 //! event-free windows that reach it.
@@ -118,12 +123,51 @@ fn contact_measure(tr: &Trace, on: usize) -> Option<Measure> {
     Some(Measure::contact(film_rise(tr, on)?, force_push(tr, on)?))
 }
 
-/// The lead-in of a run's event-free twin (ms).
-const TWIN_LEAD_IN_MS: usize = 100;
+/// The lead-in of a run's event-free twin (ms): long enough that the twin's windows end
+/// before its event.
+fn twin_lead_in_ms(reads: Reads) -> usize {
+    match reads {
+        Reads::Offset => 200,
+        Reads::Vibration { .. } | Reads::Film => 100,
+    }
+}
+
+/// The window a link collision is scored in after its onset (ms).
+const COLLISION_WINDOW_MS: usize = 130;
+
+/// How far the tip moved off its path within `after_ms` of row `on` (µm; up to the
+/// trace's end, which a run's scoring window reaches to within a row): the position
+/// error's largest distance from its mean over the 10 ms before.
+fn offset_measure(tr: &Trace, on: usize, after_ms: usize) -> Option<Measure> {
+    let (x, y) = (tr.column("pos_err_x")?, tr.column("pos_err_y")?);
+    let before = on.saturating_sub(10 * MS)..on;
+    let end = (on + after_ms * MS).min(tr.len());
+    if before.is_empty() || end < on + (after_ms - 1) * MS {
+        return None;
+    }
+    let mean = |c: &[f64]| c[before.clone()].iter().sum::<f64>() / before.len() as f64;
+    let (mx, my) = (mean(x), mean(y));
+    let off = (on..end)
+        .map(|k| (x[k] - mx).hypot(y[k] - my))
+        .fold(0.0, f64::max);
+    let um = off * 1e6;
+    Some(Measure {
+        best: um,
+        ratios: [um, 0.0, 0.0],
+    })
+}
+
+/// A link collision's measure: its offset over the window it is scored in.
+fn collision_measures(tr: &Trace, on: usize) -> Option<Measures> {
+    Some(Measures {
+        whole: offset_measure(tr, on, COLLISION_WINDOW_MS)?,
+        early: None,
+    })
+}
 
 /// A window's measure: a very soft contact's film rise (`best`) and, in `ratios`, the
-/// same and the force sensor's push; or a disturbance's three vibration ratios and the
-/// best of them.
+/// same and the force sensor's push; a disturbance's three vibration ratios and the
+/// best of them; or a link collision's offset.
 #[derive(Clone, Copy)]
 struct Measure {
     best: f64,
@@ -188,24 +232,40 @@ struct Run {
     right: bool,
 }
 
-/// The measures of one scenario's runs, and the same measures where nothing happens; for
-/// disturbances, the window their latency target leaves (ms).
+/// What a scenario's measure reads.
+#[derive(Clone, Copy, PartialEq)]
+enum Reads {
+    /// A disturbance's vibration ratios, and the window its latency target leaves (ms).
+    Vibration { target_ms: usize },
+    /// A very soft contact's film rise and force sensor's push.
+    Film,
+    /// A link collision's offset off the tip's path.
+    Offset,
+}
+
+impl Reads {
+    /// What scenario `s`'s runs are measured by.
+    fn of(s: Scenario) -> Reads {
+        match s {
+            Scenario::ContactVerySoft1 => Reads::Film,
+            Scenario::LinkCollision2 => Reads::Offset,
+            _ => Reads::Vibration {
+                target_ms: target_ms(s.name()),
+            },
+        }
+    }
+}
+
+/// The measures of one scenario's runs, and the same measures where nothing happens.
 struct Measured {
     runs: Vec<Run>,
     event_free: Vec<Measures>,
-    target_ms: Option<usize>,
-}
-
-impl Measured {
-    /// Whether these are very soft contacts' measures (the film's rise and the force
-    /// sensor's push), which have no window of their own for a latency target.
-    fn film(&self) -> bool {
-        self.target_ms.is_none()
-    }
+    reads: Reads,
 }
 
 /// One simulated run and the measures on its event-free twin.
 fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(Run, Measures)> {
+    let reads = Reads::of(s);
     let opts = SimOptions {
         seed,
         randomize: true,
@@ -215,24 +275,22 @@ fn run(detector: &Detector, s: Scenario, seed: u64) -> Option<(Run, Measures)> {
     let (on, _) = tr.truth_onset()?;
     let onset_s = tr.time().get(on).copied()?;
     let right = is_right(detector, &tr, s.expected().map(|e| (e, onset_s)))?;
-    // The event-free twin: the same run started 100 ms sooner, so that its event comes
-    // 100 ms after this run's onset.
+    // The event-free twin: the same run started sooner, so that its event comes that
+    // long after this run's onset.
     let twin = sim::simulate(
         &s,
         &SimOptions {
-            lead_in_s: TWIN_LEAD_IN_MS as f64 * 1e-3,
+            lead_in_s: twin_lead_in_ms(reads) as f64 * 1e-3,
             ..opts
         },
     )
     .ok()?;
     // The contact is judged up to 60 ms after `on`, the twin's event is later; a
-    // disturbance's windows in the twin end 50 ms before its event.
-    let measures = |tr: &Trace| {
-        if s == Scenario::ContactVerySoft1 {
-            contact_measures(tr, on)
-        } else {
-            disturbance_measures(tr, on, target_ms(s.name()))
-        }
+    // disturbance's windows in the twin end 50 ms before its event, a collision's 70 ms.
+    let measures = |tr: &Trace| match reads {
+        Reads::Film => contact_measures(tr, on),
+        Reads::Offset => collision_measures(tr, on),
+        Reads::Vibration { target_ms } => disturbance_measures(tr, on, target_ms),
     };
     let run = Run {
         measures: measures(&tr)?,
@@ -283,21 +341,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "{runs} randomized runs per scenario (seeds {base}..{}), configs/approach.toml",
         base + runs - 1
     );
-    for s in Scenario::disturbances().chain([Scenario::ContactVerySoft1]) {
+    for s in Scenario::disturbances().chain([Scenario::ContactVerySoft1, Scenario::LinkCollision2])
+    {
         let (runs, event_free) = (base..base + runs)
             .into_par_iter()
             .filter_map(|seed| run(&detector, s, seed))
             .unzip();
-        let very_soft = s == Scenario::ContactVerySoft1;
+        let reads = Reads::of(s);
         let measured = Measured {
             runs,
             event_free,
-            target_ms: (!very_soft).then(|| target_ms(s.name())),
+            reads,
         };
         print_scenario(
             s.name(),
             &measured,
-            &format!("each run's twin, {TWIN_LEAD_IN_MS} ms sooner"),
+            &format!("each run's twin, {} ms sooner", twin_lead_in_ms(reads)),
         );
     }
     Ok(())
@@ -369,14 +428,14 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
             Measured {
                 runs,
                 event_free: free_film.clone(),
-                target_ms: None,
+                reads: Reads::Film,
             }
         } else {
             let target = target_ms(&name);
             Measured {
                 runs,
                 event_free: free_windows(&|tr, on| disturbance_measures(tr, on, target)),
-                target_ms: Some(target),
+                reads: Reads::Vibration { target_ms: target },
             }
         };
         print_scenario(&name, &measured, "windows of the free-motion recordings");
@@ -388,15 +447,17 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
 /// contacts), with the right share, and the event-free comparison (its windows taken at
 /// `place`), within a disturbance's latency target too.
 fn print_scenario(name: &str, measured: &Measured, place: &str) {
-    let film = measured.film();
     let results = &measured.runs;
-    let (edges, what): (&[f64], &str) = if film {
-        (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]")
-    } else {
-        (
+    let (edges, what): (&[f64], &str) = match measured.reads {
+        Reads::Film => (&[0.3, 0.5, 0.8, 1.2], "the film's rise over 60 ms [N/s]"),
+        Reads::Offset => (
+            &[10.0, 20.0, 40.0, 80.0],
+            "how far the tip moved off its path within 130 ms [um]",
+        ),
+        Reads::Vibration { .. } => (
             &[1.5, 2.0, 3.0, 5.0],
             "vibration RMS after / before, the best of force, skin acceleration and position error",
-        )
+        ),
     };
     println!("\n{name} ({} runs), by {what}:", results.len());
     println!(
@@ -423,7 +484,7 @@ fn print_scenario(name: &str, measured: &Measured, place: &str) {
             (_, Some(h)) => format!("{lo}-{h}"),
             (_, None) => format!(">= {lo}"),
         };
-        let medians = if film {
+        let medians = if !matches!(measured.reads, Reads::Vibration { .. }) {
             String::new()
         } else {
             let median = |k: usize, v: &mut Vec<&Run>| {
@@ -444,7 +505,7 @@ fn print_scenario(name: &str, measured: &Measured, place: &str) {
         );
     }
     print_event_free(measured, place);
-    if let Some(target_ms) = measured.target_ms {
+    if let Reads::Vibration { target_ms } = measured.reads {
         print_within_target(measured, target_ms);
     }
 }
@@ -524,7 +585,7 @@ fn print_event_free(measured: &Measured, place: &str) {
             .filter(|r| r.measures.whole.ratios.iter().zip(p99s).all(|(v, p)| v < p))
             .collect()
     };
-    if measured.film() {
+    if measured.reads == Reads::Film {
         let p99s = [p99_of(0), p99_of(1)];
         let within = below_all(&p99s);
         println!(
@@ -555,7 +616,7 @@ fn print_event_free(measured: &Measured, place: &str) {
                     .copied()
                     .fold(f64::NEG_INFINITY, f64::max)
         );
-    } else {
+    } else if measured.reads != Reads::Offset {
         let p99s = [p99_of(0), p99_of(1), p99_of(2)];
         let within = below_all(&p99s);
         println!(
