@@ -23,10 +23,10 @@
 //! where the right share falls with the signal, the misses are at the sensors' reach. For
 //! each scenario, the same measure is also taken where nothing happens: in each run started
 //! 100 ms sooner (200 ms for a link collision; the same plant, motion and sensors), over
-//! the same windows, which now end 40-70 ms before its event. Where an event's measure is below the largest of those, no
-//! threshold on it finds the event without reading steady motion as that event about as
-//! often; the threshold that would find 99.5 % of the events is printed with the share of
-//! event-free windows that reach it.
+//! the same windows, which now end 40-70 ms before its event. Where an event's measure is
+//! below the largest of those, no threshold on it finds the event without reading steady
+//! motion as that event about as often; the threshold that would find 99.5 % of the events
+//! is printed with the share of event-free windows that reach it.
 //!
 //! The latency targets ask for 99 % of the disturbances within 20 ms (10 ms for large ones):
 //! the same vibration ratio over only that window after the onset, against the same window
@@ -444,7 +444,7 @@ fn recordings(detector: &Detector, paths: &[PathBuf]) -> Result<(), Box<dyn std:
 }
 
 /// One scenario's table: the runs binned by their measure (the film's rise for very soft
-/// contacts), with the right share, and the event-free comparison (its windows taken at
+/// contacts, the offset for link collisions), with the right share, and the event-free comparison (its windows taken at
 /// `place`), within a disturbance's latency target too.
 fn print_scenario(name: &str, measured: &Measured, place: &str) {
     let results = &measured.runs;
@@ -484,7 +484,7 @@ fn print_scenario(name: &str, measured: &Measured, place: &str) {
             (_, Some(h)) => format!("{lo}-{h}"),
             (_, None) => format!(">= {lo}"),
         };
-        let medians = if !matches!(measured.reads, Reads::Vibration { .. }) {
+        let medians = if let Reads::Film | Reads::Offset = measured.reads {
             String::new()
         } else {
             let median = |k: usize, v: &mut Vec<&Run>| {
@@ -585,49 +585,54 @@ fn print_event_free(measured: &Measured, place: &str) {
             .filter(|r| r.measures.whole.ratios.iter().zip(p99s).all(|(v, p)| v < p))
             .collect()
     };
-    if measured.reads == Reads::Film {
-        let p99s = [p99_of(0), p99_of(1)];
-        let within = below_all(&p99s);
-        println!(
-            "  there, 99 % below {:.2} N/s on the film and {:.2} cN on the force sensor; {} of \
-             the events ({:.1} %) read below both, {} of them right",
-            p99s[0],
-            100.0 * p99s[1],
-            within.len(),
-            100.0 * within.len() as f64 / results.len() as f64,
-            within.iter().filter(|r| r.right).count()
-        );
-        let mut pushes: Vec<f64> = results.iter().map(|r| r.measures.whole.ratios[1]).collect();
-        let threshold = quantile(&mut pushes, 0.005);
-        let free_pushes: Vec<f64> = measured
-            .event_free
-            .iter()
-            .map(|m| m.whole.ratios[1])
-            .collect();
-        let passed = free_pushes.iter().filter(|&&f| f >= threshold).count();
-        println!(
-            "  on the force sensor alone, a threshold passing 99.5 % of the events is at most \
-             {:.2} cN, which {:.1} % of the event-free windows reach (the largest: {:.2} cN)",
-            100.0 * threshold,
-            100.0 * passed as f64 / free_pushes.len() as f64,
-            100.0
-                * free_pushes
-                    .iter()
-                    .copied()
-                    .fold(f64::NEG_INFINITY, f64::max)
-        );
-    } else if measured.reads != Reads::Offset {
-        let p99s = [p99_of(0), p99_of(1), p99_of(2)];
-        let within = below_all(&p99s);
-        println!(
-            "  there, 99 % below {:.2} / {:.2} / {:.2} on the force / accel / error alone; {} of \
-             the events read below all three, {} of them right",
-            p99s[0],
-            p99s[1],
-            p99s[2],
-            within.len(),
-            within.iter().filter(|r| r.right).count()
-        );
+    // Sensor by sensor: a collision's offset is one measure.
+    match measured.reads {
+        Reads::Film => {
+            let p99s = [p99_of(0), p99_of(1)];
+            let within = below_all(&p99s);
+            println!(
+                "  there, 99 % below {:.2} N/s on the film and {:.2} cN on the force sensor; {} of \
+                 the events ({:.1} %) read below both, {} of them right",
+                p99s[0],
+                100.0 * p99s[1],
+                within.len(),
+                100.0 * within.len() as f64 / results.len() as f64,
+                within.iter().filter(|r| r.right).count()
+            );
+            let mut pushes: Vec<f64> = results.iter().map(|r| r.measures.whole.ratios[1]).collect();
+            let threshold = quantile(&mut pushes, 0.005);
+            let free_pushes: Vec<f64> = measured
+                .event_free
+                .iter()
+                .map(|m| m.whole.ratios[1])
+                .collect();
+            let passed = free_pushes.iter().filter(|&&f| f >= threshold).count();
+            println!(
+                "  on the force sensor alone, a threshold passing 99.5 % of the events is at most \
+                 {:.2} cN, which {:.1} % of the event-free windows reach (the largest: {:.2} cN)",
+                100.0 * threshold,
+                100.0 * passed as f64 / free_pushes.len() as f64,
+                100.0
+                    * free_pushes
+                        .iter()
+                        .copied()
+                        .fold(f64::NEG_INFINITY, f64::max)
+            );
+        }
+        Reads::Vibration { .. } => {
+            let p99s = [p99_of(0), p99_of(1), p99_of(2)];
+            let within = below_all(&p99s);
+            println!(
+                "  there, 99 % below {:.2} / {:.2} / {:.2} on the force / accel / error alone; {} of \
+                 the events read below all three, {} of them right",
+                p99s[0],
+                p99s[1],
+                p99s[2],
+                within.len(),
+                within.iter().filter(|r| r.right).count()
+            );
+        }
+        Reads::Offset => {}
     }
     // The threshold that would pass 99.5 % of the events, and how much steady motion it
     // would pass too.

@@ -197,11 +197,11 @@ fn a_braking_finger_is_pushed_back_beyond_its_own_inertia() {
 
 /// Link collisions at 8 cm/s of the tuning seeds (base seed 100, run seeds as `fingertip
 /// evaluate` names them; stiff obstacles, [`STIFF_OBSTACLES`], the envelope's when they
-/// were picked) on an arm whose loops take their velocity from the
-/// encoders through a 250 Hz low-pass: each stopped its fingertip hard enough that its own
-/// inertia pushed it onto its force sensor as a soft object's load does. Each blocks joint 1 with
-/// the pad turned towards it, so that the tip moves ahead along the approach as the arm
-/// stops, which the swing gate reads as the arm catching up.
+/// were picked) on an arm whose loops take their velocity from the encoders through a 250
+/// Hz low-pass: each stopped its fingertip hard enough that its own inertia pushed it onto
+/// its force sensor as a soft object's load does. Each blocks joint 1 with the pad turned
+/// towards it, so that the tip moves ahead along the approach as the arm stops, which the
+/// swing gate reads as the arm catching up.
 const STOPPED_HARD: [(Scenario, u64); 4] = [
     (Scenario::LinkCollision8, 14_820_092_336_525_572_267),
     (Scenario::LinkCollision8, 14_820_092_336_525_572_612),
