@@ -119,8 +119,12 @@ fn an_arm_held_back_by_a_soft_obstacle_is_found_by_the_slow_path() {
         ranges: vec!["obstacle.stiffness=1e4..1e5".parse().expect("a range")],
         ..SimOptions::default()
     };
-    let found_by_lag_alone =
-        confirming_where_right(CREEP_TERM, "", &SOFT_OBSTACLES, &soft, "link_collision");
+    let found_by_lag_alone = confirming_where_right(
+        &default_with(CREEP_TERM, ""),
+        &SOFT_OBSTACLES,
+        &soft,
+        "link_collision",
+    );
     assert!(
         found_by_lag_alone <= 1,
         "without the slow path, {found_by_lag_alone} of the {} soft obstacles are found: the test no longer shows the path's part",
@@ -146,8 +150,7 @@ const PUSHED_BACK: [(Scenario, u64); 7] = [
 #[test]
 fn a_knock_whose_push_swings_the_arm_is_no_slow_collision() {
     let read_as_collisions = confirming_where_right(
-        SWING_EXCESS,
-        OFF_ITSELF,
+        &default_with(SWING_EXCESS, OFF_ITSELF),
         &PUSHED_BACK,
         &SimOptions::default(),
         "link_collision",
@@ -175,8 +178,7 @@ const SLOWLY_PUSHED: [(Scenario, u64); 6] = [
 #[test]
 fn a_push_that_turns_back_is_no_slow_collision() {
     let read_as_collisions = confirming_where_right(
-        KEPT,
-        UNSMOOTHED,
+        &default_with(KEPT, UNSMOOTHED),
         &SLOWLY_PUSHED,
         &SimOptions::default(),
         "link_collision",

@@ -217,7 +217,7 @@ fn contacts_at_250_hz_without(gate: &str, open: &str, picked: &[(Scenario, u64)]
         velocity_filter_hz: 250.0,
         ..SimOptions::default()
     };
-    confirming_where_right(gate, open, picked, &opts, "contact")
+    confirming_where_right(&default_with(gate, open), picked, &opts, "contact")
 }
 
 #[test]
@@ -227,8 +227,12 @@ fn a_struck_arm_pushing_its_fingertip_onto_its_force_sensor_is_no_contact() {
         ranges: vec![STIFF_OBSTACLES.parse().expect("a range")],
         ..SimOptions::default()
     };
-    let read_as_contacts =
-        confirming_where_right(SWING_GATE, NO_SWING_GATE, &STOPPED_HARD, &stiff, "contact");
+    let read_as_contacts = confirming_where_right(
+        &default_with(SWING_GATE, NO_SWING_GATE),
+        &STOPPED_HARD,
+        &stiff,
+        "contact",
+    );
     assert!(
         read_as_contacts >= 3,
         "without the gate, only {read_as_contacts} of the {} collisions confirm a contact: the test no longer shows the gate's part",

@@ -54,23 +54,22 @@ pub fn default_with(written: &str, instead: &str) -> Detector {
 }
 
 /// Of the randomized runs `picked` (each a scenario and a run seed, as `fingertip evaluate`
-/// names them; the other options as in `base`), how many the default detector confirms
-/// `event` on once `written` in its configuration is `instead` (see [`default_with`]),
-/// the default itself checked to get every one of them right.
+/// names them; the other options as in `base`), how many a `changed` default detector (see
+/// [`default_with`]) confirms `event` on, the default itself checked to get every one of
+/// them right.
 pub fn confirming_where_right(
-    written: &str,
-    instead: &str,
+    changed: &Detector,
     picked: &[(Scenario, u64)],
     base: &SimOptions,
     event: &str,
 ) -> usize {
-    let (default, changed) = (detector(APPROACH_TOML), default_with(written, instead));
+    let default = detector(APPROACH_TOML);
     picked
         .iter()
         .filter(|&&(s, seed)| {
             let run = runs(s, [seed], base);
             assert_eq!(right(&default, s, &run), [true], "{s:?} seed {seed}");
-            confirmed(&changed, &run[0]).iter().any(|e| e == event)
+            confirmed(changed, &run[0]).iter().any(|e| e == event)
         })
         .count()
 }
