@@ -24,8 +24,9 @@ use fingertip::trace::Trace;
 
 mod support;
 use support::{
-    STIFF_OBSTACLES, confirmed, confirmed_at, confirming_where_right, default_with, detector,
-    force_noise, right, right_within, runs, steady_motion, times, trace_of,
+    STIFF_OBSTACLES, confirmed, confirmed_at, confirming_where_right, default_with,
+    default_with_each, detector, force_noise, right, right_within, runs, steady_motion, times,
+    trace_of,
 };
 
 /// The default's encoder term, as written in `configs/approach.toml`.
@@ -111,31 +112,7 @@ fn shaken_error_um(t: f64) -> f64 {
 /// that falls behind or is being stopped also moves off its path without swinging, which
 /// that gate alone would keep from reading as shaken.
 fn ungated_with(written: &str, instead: &str) -> Detector {
-    assert!(
-        APPROACH_TOML.contains(written) && APPROACH_TOML.contains(ENCODER_TERM),
-        "the default configuration no longer holds `{written}` and its encoder term: the test no longer tests them"
-    );
-    detector(
-        &APPROACH_TOML
-            .replacen(ENCODER_TERM, UNHELD_TERM, 1)
-            .replacen(written, instead, 1),
-    )
-}
-
-/// The default with `written` in its configuration `instead` (see [`default_with`]), and a
-/// tenth of the commanded travel allowed for an arm pushed off its path whether or not it
-/// has swung back: a link held by an obstacle and not swung back holds the disturbance
-/// down through that allowance alone, whatever else is changed.
-fn allowing_any_with(written: &str, instead: &str) -> Detector {
-    assert!(
-        APPROACH_TOML.contains(written) && APPROACH_TOML.contains(HELD_BACK),
-        "the default configuration no longer holds `{written}` and its allowance: the test no longer tests them"
-    );
-    detector(
-        &APPROACH_TOML
-            .replacen(HELD_BACK, LAG_ANY_TIME, 1)
-            .replacen(written, instead, 1),
-    )
+    default_with_each(&[(ENCODER_TERM, UNHELD_TERM), (written, instead)])
 }
 
 #[test]
@@ -456,7 +433,12 @@ fn a_heavy_arms_collision_is_given_the_disturbances_longer_wait() {
         ..SimOptions::default()
     };
     let read_as_disturbances = confirming_where_right(
-        &allowing_any_with(DISTURBANCE_CONFIRM, "dwell_ms = 5.0, hold_ms = 150.0 }"),
+        // With the lag's tenth allowed at any time: a link held by an obstacle and not
+        // swung back holds the disturbance down through that allowance alone.
+        &default_with_each(&[
+            (HELD_BACK, LAG_ANY_TIME),
+            (DISTURBANCE_CONFIRM, "dwell_ms = 5.0, hold_ms = 150.0 }"),
+        ]),
         &HEAVY_COLLISIONS,
         &heavy,
         "disturbance",

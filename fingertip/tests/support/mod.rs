@@ -46,11 +46,22 @@ pub fn detector(toml: &str) -> Detector {
 /// The default detector with `written`, which `configs/approach.toml` must hold as written,
 /// replaced by `instead`: the default without one of its parts, or with it changed.
 pub fn default_with(written: &str, instead: &str) -> Detector {
-    assert!(
-        APPROACH_TOML.contains(written),
-        "the default configuration no longer holds `{written}`: the test no longer tests it"
-    );
-    detector(&APPROACH_TOML.replacen(written, instead, 1))
+    default_with_each(&[(written, instead)])
+}
+
+/// The default detector with each `(written, instead)` change of [`default_with`] made, in
+/// order: a part changed while another that would mask it is taken away.
+pub fn default_with_each(changes: &[(&str, &str)]) -> Detector {
+    let toml = changes
+        .iter()
+        .fold(APPROACH_TOML.to_owned(), |toml, &(written, instead)| {
+            assert!(
+                toml.contains(written),
+                "the default configuration no longer holds `{written}`: the test no longer tests it"
+            );
+            toml.replacen(written, instead, 1)
+        });
+    detector(&toml)
 }
 
 /// Of the randomized runs `picked` (each a scenario and a run seed, as `fingertip evaluate`
