@@ -90,6 +90,15 @@ pub fn confirming_where_right(
 /// from so that their runs stay the ones picked.
 pub const STIFF_OBSTACLES: &str = "obstacle.stiffness=3e5..2e6";
 
+/// Randomized runs against posts that yield (a padded fixture, a person's arm: 2·10^3 to
+/// 1.5·10^4 N/m), the other options as the envelope's.
+pub fn padded_posts() -> SimOptions {
+    SimOptions {
+        ranges: vec!["obstacle.stiffness=2e3..1.5e4".parse().expect("a range")],
+        ..SimOptions::default()
+    }
+}
+
 /// The randomized runs of scenario `s` on seeds `seeds`, the other options as in `base`.
 pub fn runs(s: Scenario, seeds: impl IntoIterator<Item = u64>, base: &SimOptions) -> Vec<Trace> {
     seeds
