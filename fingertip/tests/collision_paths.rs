@@ -7,7 +7,9 @@
 //! arm moving freely at a steady command keeps its tracking error. That offset is
 //! judged beyond what the arm's swing explains (a knock pushes the arm as far, swinging
 //! it, and comes back), only while the commanded speed holds steady (an arm
-//! lagging its command falls further behind as the command speeds up), and smoothed over
+//! lagging its command falls further behind as the command speeds up) and no step of the
+//! commanded acceleration is remembered (a turn across the approach moves the usual
+//! error, which the usual path takes in over hundreds of ms), and smoothed over
 //! about 13 ms (a slower push leaves a bump in it and turns back; an obstacle's growth
 //! holds). The fast path (`lag_settled`) waits in the same way for the commanded speed to
 //! stop changing: an arm whose loops leave a following error that grows with the speed
@@ -420,5 +422,63 @@ fn a_joint_blocked_against_the_usual_error_is_a_link_collision() {
     assert!(
         when.is_some_and(|t| t < 0.15),
         "on the error's size the steady tracking error reads no link collision before the block: the test no longer shows what the usual path does"
+    );
+}
+
+/// 500 ms of a 20 mm/s approach whose commanded velocity turns across it from 150 ms on:
+/// from 40 mm/s one way to 10 mm/s the other over 40 ms (a step of 1.25 m/s^2 and back),
+/// the speed along the approach held. The loops' usual tracking error follows the
+/// velocity, 0.8 ms of it across the approach (friction and the feed-forward's error),
+/// through their own lag of 20 ms: it moves from 32 µm one side to 8 µm the other and
+/// stays there.
+fn turning_across() -> Trace {
+    let t = times(2500);
+    let across = |s: f64| -0.040 + 0.050 * ((s - 0.15) / 0.04).clamp(0.0, 1.0);
+    let vel_y: Vec<f64> = t.iter().map(|&s| across(s)).collect();
+    let acc_y = t
+        .iter()
+        .map(|&s| if (0.15..0.19).contains(&s) { 1.25 } else { 0.0 })
+        .collect();
+    let step = 1.0 / 5000.0 / 0.020;
+    let mut usual = 0.0008 * vel_y[0];
+    let err_y = vel_y
+        .iter()
+        .map(|v| {
+            usual += (0.0008 * v - usual) * step;
+            usual
+        })
+        .collect();
+    let n = t.len();
+    trace_of(
+        "turning across the approach",
+        t,
+        vec![
+            ("pos_err_x", vec![10e-6; n]),
+            ("pos_err_y", err_y),
+            ("vel_des_x", vec![0.020; n]),
+            ("vel_des_y", vel_y),
+            ("acc_des_y", acc_y),
+        ],
+    )
+}
+
+/// The default's slow path, waiting out a step of the commanded acceleration.
+const CALM_GATE: &str =
+    "input = \"creep_steady\", unless = { feature = \"suspension_ring\", above = 0.1 }";
+/// The same path at any time.
+const NO_CALM_GATE: &str =
+    "input = \"creep_steady\", unless = { feature = \"suspension_ring\", above = 30000.0 }";
+
+#[test]
+fn an_arm_turning_across_its_approach_is_no_collision() {
+    let turning = turning_across();
+    assert!(
+        confirmed(&detector(APPROACH_TOML), &turning).is_empty(),
+        "an arm whose usual error follows a turn across the approach"
+    );
+    assert_eq!(
+        confirmed(&default_with(CALM_GATE, NO_CALM_GATE), &turning),
+        ["link_collision"],
+        "without waiting out the turn's steps, the turn reads no collision: the test no longer shows the wait's part"
     );
 }
