@@ -91,8 +91,14 @@ const USUAL_Y: &str = "input = \"pos_err_y\", cutoff_hz = 1.0, warm_up_ms = 20.0
 /// once learnt: a ramp settles in the offset at half the size.
 fn usual_at_2_hz() -> detector_core::Detector {
     default_with_each(&[
-        (USUAL_X, &USUAL_X.replace("1.0", "2.0")),
-        (USUAL_Y, &USUAL_Y.replace("1.0", "2.0")),
+        (
+            USUAL_X,
+            &USUAL_X.replace("cutoff_hz = 1.0", "cutoff_hz = 2.0"),
+        ),
+        (
+            USUAL_Y,
+            &USUAL_Y.replace("cutoff_hz = 1.0", "cutoff_hz = 2.0"),
+        ),
     ])
 }
 
