@@ -325,7 +325,7 @@ fn an_arm_lagging_a_speeding_command_is_no_slow_collision() {
     // From 20 to 80 mm/s over 200 ms (0.6 m/s^2 at most), the arm 10 ms late (a loop of
     // 16 Hz): its error grows by up to 10 ms x 0.6 m/s^2 = 6 mm/s while it speeds up, too
     // little for `lag` (8 µm over 1.3 ms against an allowance of 6.6 at 50 mm/s) but far
-    // more than the 46 µm the slow path confirms at over 80 ms; nothing holds it back.
+    // more than the 15 µm at which the slow path confirms; nothing holds it back.
     let speeding = speeding_up(0.6, 0.2, 0.010);
     assert!(
         confirmed(&default, &speeding).is_empty(),
