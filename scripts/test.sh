@@ -34,7 +34,7 @@ cargo fmt --all --check
 
 step "lints: host crates, and the Cortex-M4 test program as built for the target"
 cargo clippy --all-targets -- -D warnings
-cargo clippy -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
+cargo clippy -p detector-core -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
 
 step "docs build without warnings"
 RUSTDOCFLAGS="-D warnings" cargo doc --no-deps -p detector-core -p detector-build -p fingertip-can -p fingertip -p host-tests -p firmware -p fingertip-tick --quiet

@@ -1799,7 +1799,45 @@ const fn mean_gain_samples(alpha: u32) -> u16 {
 #[inline(always)]
 fn filter_step(st: &mut StageState, x: i32, gain: u32) {
     let diff = x.saturating_sub(filter_output(st));
-    st.acc += i64::from(diff) * i64::from((gain & 0x7fff_ffff) << 1);
+    let twice = (gain & 0x7fff_ffff) << 1;
+    match i32::try_from(twice) {
+        // Every cut-off below the detector rate over 2π (α < ½): one signed
+        // multiply-accumulate.
+        Ok(g) => st.acc = mul_acc(st.acc, diff, g),
+        Err(_) => st.acc += i64::from(diff) * i64::from(twice),
+    }
+}
+
+/// `acc + a · b`, exactly (|a · b| ≤ 2⁶², and the callers' sums are shown to fit). In Rust
+/// it is what the chip's SMLAL does, and the compiler writes that instruction whenever it
+/// sees both factors as 32-bit signed numbers; but a generated tick names one cut-off's gain
+/// in several features, and the compiler then keeps it in a register as a 64-bit number
+/// whose sign it no longer knows, and multiplies as if it were unsigned and 64 bits wide
+/// (five instructions where one does). On the chip it is that one instruction, written out.
+#[inline(always)]
+fn mul_acc(acc: i64, a: i32, b: i32) -> i64 {
+    #[cfg(smlal)]
+    {
+        let (mut lo, mut hi) = (acc as u32, (acc >> 32) as u32);
+        // SAFETY: SMLAL reads and writes the four registers named, and nothing else: no
+        // memory, no stack, no flags.
+        #[allow(unsafe_code)]
+        unsafe {
+            core::arch::asm!(
+                "smlal {lo}, {hi}, {a}, {b}",
+                lo = inout(reg) lo,
+                hi = inout(reg) hi,
+                a = in(reg) a,
+                b = in(reg) b,
+                options(pure, nomem, nostack, preserves_flags),
+            );
+        }
+        ((u64::from(hi) << 32) | u64::from(lo)) as i64
+    }
+    #[cfg(not(smlal))]
+    {
+        acc + i64::from(a) * i64::from(b)
+    }
 }
 
 /// A filter's output: its state's upper word.
