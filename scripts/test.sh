@@ -32,7 +32,7 @@ fi
 step "formatting"
 cargo fmt --all --check
 
-step "lints: host crates, and the Cortex-M4 test program as built for the target"
+step "lints: host crates, and the core and the Cortex-M4 test program as built for the target"
 cargo clippy --all-targets -- -D warnings
 cargo clippy -p detector-core -p fingertip-qemu --target thumbv7em-none-eabihf -- -D warnings
 
