@@ -282,7 +282,7 @@ mod target {
         let mut image_crc = Crc32::new();
         image_crc.update(IMAGE);
         hprintln!(
-            "fingertip-qemu config={} image_crc={:08x} trace={} segments={} ticks={} channels={} features={} events={} state_bytes={}",
+            "fingertip-qemu config={} image_crc={:08x} trace={} segments={} ticks={} channels={} features={} events={} state_in_ram={} state_saved={}",
             CONFIG_SOURCE,
             image_crc.value(),
             TRACE_SOURCE,
@@ -291,7 +291,8 @@ mod target {
             detector.channels().len(),
             detector.features().len(),
             detector.events().len(),
-            State::SIZE
+            State::SIZE,
+            State::SAVED_BYTES
         );
 
         let meter = Meter::calibrate();
