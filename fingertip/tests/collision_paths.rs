@@ -4,19 +4,19 @@
 //! holds) loses too little within a controller period for `lag`, and is found on how far
 //! the tip has moved off its usual path (`creep_kept`), the usual error learnt over the
 //! first 20 ms and followed at 1 Hz. No share of the commanded travel is allowed for: an
-//! arm moving freely at a steady command keeps its tracking error. That offset is
-//! judged beyond what the arm's swing explains (a knock pushes the arm as far, swinging
-//! it, and comes back), only while the commanded speed holds steady (an arm
-//! lagging its command falls further behind as the command speeds up) and no step of the
-//! commanded acceleration is remembered (a turn across the approach moves the usual
-//! error, which the usual path takes in over hundreds of ms), and smoothed over
-//! about 13 ms (a slower push leaves a bump in it and turns back; an obstacle's growth
-//! holds). The fast path (`lag_settled`) waits in the same way for the commanded speed to
-//! stop changing: an arm whose loops leave a following error that grows with the speed
-//! falls behind a changing command as fast as a held arm, and reads the growth less a
-//! fortieth of the offset (`lag_growing`), so that a push whose offset stands reads as no
-//! hold. Both read the error off its usual path (`err_off`), so that a blocked joint
-//! moving the tip against its usual tracking error reads in full.
+//! arm moving freely at a steady command keeps its tracking error. That offset is judged
+//! beyond what the arm's swing explains (a knock pushes the arm as far, swinging it, and
+//! comes back), only while the commanded speed holds steady (an arm lagging its command
+//! falls further behind as the command speeds up) and no step of the commanded acceleration
+//! is remembered (a turn across the approach moves the usual error, which the usual path
+//! takes in over hundreds of ms), and smoothed over about 13 ms (a slower push leaves a
+//! bump in it and turns back; an obstacle's growth holds), and read only while the tip is
+//! not coming back onto its path. The fast path (`lag_settled`) waits in the same way for
+//! the commanded speed to stop changing: an arm whose loops leave a following error that
+//! grows with the speed falls behind a changing command as fast as a held arm, and reads
+//! the growth less a fortieth of the offset (`lag_growing`), so that a push whose offset
+//! stands reads as no hold. Both read the error off its usual path (`err_off`), so that a
+//! blocked joint moving the tip against its usual tracking error reads in full.
 
 use fingertip::APPROACH_TOML;
 use fingertip::sim::{Scenario, SimOptions};
@@ -29,8 +29,10 @@ use support::{
 };
 
 /// The default's slow link-collision term, as written in `configs/approach.toml`.
-const CREEP_TERM: &str = "    { feature = \"creep_kept\", weight = 1.0, cdf = { sigmoid = { low = 6.5, high = 19.5 } } },\n";
-/// The default's smoothed growth, as its term reads it.
+const CREEP_TERM: &str = "    { feature = \"creep_held\", weight = 1.0, cdf = { sigmoid = { low = 6.5, high = 19.5 } } },\n";
+/// The default's smoothed growth, cut once the tip comes back, as its term reads it.
+const HELD: &str = "{ feature = \"creep_held\", weight = 1.0,";
+/// The smoothed growth uncut.
 const KEPT: &str = "{ feature = \"creep_kept\", weight = 1.0,";
 /// The growth unsmoothed.
 const UNSMOOTHED: &str = "{ feature = \"creep_steady\", weight = 1.0,";
@@ -273,7 +275,7 @@ const SLOWLY_PUSHED: [(Scenario, u64); 6] = [
 #[test]
 fn a_push_that_turns_back_is_no_slow_collision() {
     let read_as_collisions = confirming_where_right(
-        &default_with(KEPT, UNSMOOTHED),
+        &default_with(HELD, UNSMOOTHED),
         &SLOWLY_PUSHED,
         &SimOptions::default(),
         "link_collision",
@@ -282,6 +284,46 @@ fn a_push_that_turns_back_is_no_slow_collision() {
         read_as_collisions >= 5,
         "judged unsmoothed, only {read_as_collisions} of the {} pushed arms confirm a link collision: the test no longer shows the smoothing's part",
         SLOWLY_PUSHED.len()
+    );
+}
+
+/// At a steady commanded 34 mm/s, the tip moves off its 10 µm tracking error from 150 ms
+/// on, smoothly, by `top` µm over 40 ms, and comes back over the next 30 ms if `back`, or
+/// stays there: a drive that moves the tip off its path and lets it back (the sixth model's
+/// arm, 25 µm off over 40 ms and back over 35 at 34 mm/s), or an obstacle that holds it.
+fn bump(top: f64, back: bool) -> Trace {
+    steady_motion(0.034, move |t| {
+        let rise = ((t - 0.15) / 0.040).clamp(0.0, 1.0);
+        let fall = if back {
+            ((t - 0.19) / 0.030).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let smooth = |x: f64| (1.0 - (x * std::f64::consts::PI).cos()) / 2.0;
+        10.0 + top * (smooth(rise) - smooth(fall))
+    })
+}
+
+#[test]
+fn a_tip_that_comes_back_onto_its_path_is_no_slow_collision() {
+    let default = detector(APPROACH_TOML);
+    let uncut = default_with(HELD, KEPT);
+    // 28 µm off and back: smoothed, the offset reaches the confirmation as the tip turns
+    // back and stays above it for the 10 ms the confirmation waits; cut where the tip
+    // comes back, it does not. (The swing back reads as a disturbance: nothing else
+    // moved the arm.)
+    assert!(
+        confirmed_at(&default, &bump(28.0, true), "link_collision").is_none(),
+        "a tip 28 µm off its path and back is a link collision"
+    );
+    assert!(
+        confirmed_at(&uncut, &bump(28.0, true), "link_collision").is_some(),
+        "uncut, the tip 28 µm off its path and back is no link collision either: the test no longer shows what the cut does"
+    );
+    // The same move held: an obstacle.
+    assert!(
+        confirmed_at(&default, &bump(28.0, false), "link_collision").is_some(),
+        "a tip held 28 µm off its path is no link collision"
     );
 }
 
