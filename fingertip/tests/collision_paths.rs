@@ -25,7 +25,7 @@ use fingertip::trace::Trace;
 mod support;
 use support::{
     confirmed, confirmed_at, confirming_where_right, default_with, default_with_each, detector,
-    force_noise, padded_posts, steady_motion, times, trace_of,
+    force_noise, padded_posts, runs, steady_motion, times, trace_of,
 };
 
 /// The default's slow link-collision term, as written in `configs/approach.toml`.
@@ -325,6 +325,34 @@ fn a_tip_that_comes_back_onto_its_path_is_no_slow_collision() {
         confirmed_at(&default, &bump(28.0, false), "link_collision").is_some(),
         "a tip held 28 µm off its path is no link collision"
     );
+}
+
+/// Minutes of free motion of the tuning seeds (base seed 100, run seeds as `fingertip
+/// evaluate` names them) on drives that bump the tip 10-30 µm off its path and let it
+/// back (`plant.drive_bump`): smoothed but uncut, a bump each read as a link collision.
+const BUMPED_MINUTES: [u64; 2] = [3_626_650_549_393_848_377, 3_626_650_549_393_848_406];
+
+#[test]
+fn a_drive_that_bumps_the_tip_off_its_path_and_back_is_no_slow_collision() {
+    let bumping = SimOptions {
+        duration_s: Some(60.0),
+        ranges: vec!["plant.drive_bump=1e-5..3e-5".parse().expect("a range")],
+        ..SimOptions::default()
+    };
+    let minutes = runs(Scenario::FreeMotion, BUMPED_MINUTES, &bumping);
+    let default = detector(APPROACH_TOML);
+    let uncut = default_with(HELD, KEPT);
+    for (seed, minute) in BUMPED_MINUTES.iter().zip(&minutes) {
+        assert_eq!(
+            confirmed(&default, minute),
+            Vec::<String>::new(),
+            "free motion {seed} on bumping drives"
+        );
+        assert!(
+            confirmed_at(&uncut, minute, "link_collision").is_some(),
+            "uncut, free motion {seed} on bumping drives is no link collision either: the test no longer shows what the cut does"
+        );
+    }
 }
 
 /// A command speeding up from 20 mm/s by `peak` × `ramp` / 2 from 100 ms on, over `ramp`

@@ -1047,3 +1047,45 @@ fn a_padded_obstacle_takes_less_of_the_motion() {
         }
     }
 }
+
+#[test]
+fn a_drive_that_bumps_moves_the_tip_off_its_path_and_lets_it_back() {
+    // The same free motion with drives that bump the tip by 30 µm (each bump a third of
+    // that to all of it) twice a second on average, and without: nothing else in the arm's
+    // motion is random, so the position errors differ by the bumps alone.
+    let free = |ranges: &[&str]| {
+        sim::simulate(
+            &Scenario::FreeMotion,
+            &SimOptions {
+                seed: 3,
+                randomize: true,
+                duration_s: Some(4.0),
+                ranges: ranges.iter().map(|r| r.parse().expect("a range")).collect(),
+                ..SimOptions::default()
+            },
+        )
+        .expect("valid options")
+    };
+    let (quiet, bumped) = (
+        free(&[]),
+        free(&["plant.drive_bump=3e-5..3e-5", "plant.drive_bump_rate=2..2"]),
+    );
+    assert_eq!(param(&quiet, "plant.drive_bump"), 0.0);
+    let (qx, qy) = (col(&quiet, "pos_err_x"), col(&quiet, "pos_err_y"));
+    let (bx, by) = (col(&bumped, "pos_err_x"), col(&bumped, "pos_err_y"));
+    let off: Vec<f64> = (0..quiet.len())
+        .map(|i| (bx[i] - qx[i]).hypot(by[i] - qy[i]))
+        .collect();
+    let most = max_abs(&off);
+    assert!(
+        (10e-6..45e-6).contains(&most),
+        "the bumps moved the tip {most} m off the path it keeps without them"
+    );
+    // Between bumps the tip is back on that path, to within the encoders' 1 µm steps.
+    let back = off.iter().filter(|&&d| d < 2e-6).count();
+    assert!(
+        back > off.len() / 4,
+        "the tip is back on its path in {back} of {} rows",
+        off.len()
+    );
+}

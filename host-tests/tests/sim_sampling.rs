@@ -238,7 +238,8 @@ fn duration_option_sets_the_length() {
 
 /// A range that cannot be drawn from is refused with the reason, before any work: an
 /// unknown parameter, bounds out of order or not finite, a sign the parameter cannot take,
-/// bounds beyond ten times the envelope's, or a range on a run that draws nothing.
+/// bounds beyond ten times the envelope's (or a reach of its own, for a parameter the
+/// envelope does not draw), or a range on a run that draws nothing.
 #[test]
 fn bad_ranges_are_errors_not_panics() {
     let range = |name: &str, min: f64, max: f64| ParamRange {
@@ -263,6 +264,11 @@ fn bad_ranges_are_errors_not_panics() {
         (range("plant.drive_ripple", -0.01, 0.05), true, "0 or more"),
         (range("plant.pad_angle", -0.1, 0.5), true, "above 0"),
         (range("plant.arm_mass", 0.3, 5.1), true, "within +-5"),
+        (
+            range("plant.drive_bump", 0.0, 2e-4),
+            true,
+            "within +-0.0001",
+        ),
         (
             range("plant.feedforward_error", -1.6, 0.0),
             true,
@@ -356,8 +362,9 @@ fn ranges_replace_the_envelope() {
 }
 
 /// Every parameter drawn at the ends of what a range may reach (from a tenth of its
-/// envelope's lower bound, or 0, up to it; from its upper bound to ten times it) gives a
-/// trace whose channels are finite: no panic, no NaN.
+/// envelope's lower bound, or 0, up to it; from its upper bound to ten times it, or to
+/// its reach where the envelope does not draw it) gives a trace whose channels are
+/// finite: no panic, no NaN.
 #[test]
 fn every_parameter_at_the_ends_of_its_reach_runs() {
     for p in sim::params::all_specs() {
@@ -375,7 +382,9 @@ fn every_parameter_at_the_ends_of_its_reach_runs() {
             "free_motion" => Scenario::FreeMotion,
             _ => Scenario::ContactHard5,
         };
-        let reach = sim::params::RANGE_REACH * p.min.abs().max(p.max.abs());
+        let reach = p
+            .beyond
+            .unwrap_or(sim::params::RANGE_REACH * p.min.abs().max(p.max.abs()));
         let low = if p.min > 0.0 {
             p.min / sim::params::RANGE_REACH
         } else if p.min >= 0.0 || p.draw == sim::params::Draw::EitherSign {

@@ -55,7 +55,7 @@
 //!   velocity and acceleration.
 
 use super::filters::{AntiAliasFilter, HighPass1};
-use super::params::{Plant, Sensors};
+use super::params::{Plant, Sensors, uniform};
 use super::trajectory::Trajectory;
 use super::{CHANNELS, MIN_INTERNAL_RATE_HZ};
 use rand::{Rng, RngExt};
@@ -479,6 +479,64 @@ impl Phasor {
         let norm = (self.cos * self.cos + self.sin * self.sin).sqrt();
         self.cos /= norm;
         self.sin /= norm;
+    }
+}
+
+/// The drive's bumps ([`Plant::drive_bump`]): smooth pushes on the arm, each of which the
+/// loops' stiffness holds at an offset of the tip along one joint's own direction.
+struct DriveBumps {
+    /// Each bump's start and length (s) and its peak force (N, x and y), by start.
+    bumps: Vec<(f64, f64, [f64; 2])>,
+    /// The first bump not yet over.
+    next: usize,
+}
+
+impl DriveBumps {
+    /// The bumps of a run of `duration` s, at random times (a Poisson process at
+    /// `drive_bump_rate`), drawn from `rng`; none, and nothing drawn, where the drive does
+    /// not bump.
+    fn new<R: Rng>(p: &Plant, chain: &Chain, kp: f64, duration: f64, rng: &mut R) -> DriveBumps {
+        let mut bumps = Vec::new();
+        if p.drive_bump > 0.0 && p.drive_bump_rate > 0.0 {
+            let mut t = 0.0;
+            loop {
+                t -= (1.0 - rng.random::<f64>()).ln() / p.drive_bump_rate;
+                if t >= duration {
+                    break;
+                }
+                let size = p.drive_bump * uniform(rng, 1.0 / 3.0, 1.0);
+                let length = uniform(rng, 0.05, 0.10);
+                let column = chain.linkage.columns[usize::from(rng.random::<bool>())];
+                let size = if rng.random::<bool>() { size } else { -size };
+                let norm = dot(column, column).sqrt();
+                // The loops hold the tip at `x` against a force `kp A x` (the module's
+                // header).
+                let offset = column.map(|c| c / norm * size);
+                let force = mul(&chain.linkage.shape, offset).map(|f| f * kp);
+                bumps.push((t, length, force));
+            }
+        }
+        DriveBumps { bumps, next: 0 }
+    }
+
+    /// The bumps' force at `t` (s), x and y, `t` never decreasing: a raised cosine over
+    /// each bump's length, those that overlap added.
+    fn force(&mut self, t: f64) -> [f64; 2] {
+        while self
+            .bumps
+            .get(self.next)
+            .is_some_and(|&(start, length, _)| t >= start + length)
+        {
+            self.next += 1;
+        }
+        let mut f = [0.0; 2];
+        for &(start, length, peak) in self.bumps[self.next..].iter().take_while(|b| t >= b.0) {
+            if t < start + length {
+                let w = (1.0 - (TAU * (t - start) / length).cos()) / 2.0;
+                f = std::array::from_fn(|k| f[k] + peak[k] * w);
+            }
+        }
+        f
     }
 }
 
@@ -1320,7 +1378,8 @@ impl SensorChain {
     }
 }
 
-/// Runs the simulation. `noise` drives the sensor noise and the hum phases.
+/// Runs the simulation. `noise` drives the sensor noise, the hum phases and the drive's
+/// bumps.
 pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
     let p = &setup.plant;
     let n_over = setup.oversampling.max(1);
@@ -1369,6 +1428,13 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         phasor: Phasor::new(0.0, 0.0),
         direction: [0.0; 2],
     };
+    let mut bumps = DriveBumps::new(
+        p,
+        &chain,
+        controller.kp,
+        setup.rows as f64 / setup.rate_hz,
+        noise,
+    );
     // The drive's ripple has rung the structure since long before: each body starts on its
     // steady response to it, not at rest, from which a lightly damped mode would build up
     // over tens of ms.
@@ -1413,6 +1479,7 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
         controller.update(i, &mut setup.trajectory, &b, &mut ripple);
         context.update(i, &mut setup.trajectory, &b);
         let ripple_force = ripple.force();
+        let bump_force = bumps.force(t);
         // The outside forces on each body, x and y: the disturbance on the body it strikes,
         // the obstacle along x.
         let mut on_arm = [0.0; 2];
@@ -1461,7 +1528,8 @@ pub(crate) fn run<R: Rng>(setup: &mut Setup, noise: &mut R) -> Output {
             chain.foam_k[k] * (b.xd[k] - b.xs[k]) + chain.foam_c[k] * (b.vd[k] - b.vs[k])
         });
         let on_arm_total: [f64; 2] = std::array::from_fn(|k| {
-            let drive = controller.force[k] + ripple_force[k] - chain.friction(b.va[k]);
+            let drive =
+                controller.force[k] + ripple_force[k] + bump_force[k] - chain.friction(b.va[k]);
             drive - link[k] + on_arm[k]
         });
         let a_arm = mul(&inv_ma, on_arm_total);

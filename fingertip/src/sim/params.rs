@@ -29,6 +29,10 @@ pub struct ParamSpec {
     pub max: f64,
     /// How a randomized run draws it from the range.
     pub draw: Draw,
+    /// For a parameter the envelope holds at one value (one it does not draw yet), the
+    /// largest magnitude a [`ParamRange`] may reach; otherwise [`RANGE_REACH`] times the
+    /// envelope's.
+    pub beyond: Option<f64>,
     /// What the parameter is.
     pub doc: &'static str,
 }
@@ -134,7 +138,8 @@ impl ParamRange {
     /// finite or in the wrong order, a sign the parameter cannot take (a mass, a
     /// stiffness or a rate drawn from a positive envelope stays positive; one that may be
     /// 0 stays at or above 0; a magnitude drawn with either sign stays at or above 0), or
-    /// bounds more than [`RANGE_REACH`] times the envelope's larger one.
+    /// bounds more than [`RANGE_REACH`] times the envelope's larger one (for a parameter
+    /// the envelope does not draw, beyond its [`ParamSpec::beyond`]).
     pub fn check(&self) -> Result<(), String> {
         let spec = all_specs()
             .into_iter()
@@ -151,10 +156,19 @@ impl ParamRange {
                 "{self}: the bounds must be finite numbers, min <= max"
             ));
         }
-        let reach = RANGE_REACH * spec.min.abs().max(spec.max.abs());
+        let (reach, why) = match spec.beyond {
+            Some(reach) => (
+                reach,
+                "the reach of a parameter the envelope does not draw".to_string(),
+            ),
+            None => (
+                RANGE_REACH * spec.min.abs().max(spec.max.abs()),
+                format!("{RANGE_REACH} times the envelope's larger bound"),
+            ),
+        };
         if lo < -reach || hi > reach {
             return Err(format!(
-                "{self}: the bounds must stay within +-{reach} ({RANGE_REACH} times the envelope's {} .. {})",
+                "{self}: the bounds must stay within +-{reach} ({why}; the envelope's {} .. {})",
                 spec.min, spec.max
             ));
         }
@@ -215,10 +229,12 @@ macro_rules! param_group {
     (@draw) => { Draw::Uniform };
     (@draw log) => { Draw::Log };
     (@draw either_sign) => { Draw::EitherSign };
+    (@beyond) => { None };
+    (@beyond $reach:expr) => { Some($reach) };
     (
         $(#[doc = $sdoc:literal])+
         struct $name:ident, group $group:literal {
-            $( $(#[doc = $doc:literal])+ $field:ident: $unit:literal = $nom:expr, [$lo:expr, $hi:expr] $($scale:ident)?; )+
+            $( $(#[doc = $doc:literal])+ $field:ident: $unit:literal = $nom:expr, [$lo:expr, $hi:expr $(; beyond $reach:expr)?] $($scale:ident)?; )+
         }
     ) => {
         $(#[doc = $sdoc])+
@@ -238,6 +254,7 @@ macro_rules! param_group {
                     min: $lo,
                     max: $hi,
                     draw: param_group!(@draw $($scale)?),
+                    beyond: param_group!(@beyond $($reach)?),
                     doc: concat!($($doc),+),
                 }, )+
             ];
@@ -387,6 +404,18 @@ param_group! {
         /// nothing; 0.6: a film at the bottom of a skin whose pad rides on it (up to 18 g
         /// in a padded tip).
         film_share: "1" = 0.25, [0.0, 0.6];
+        /// The largest offset by which the drive moves the tip off its path and lets it
+        /// back, whatever the command: a joint whose transmission takes up its soft zone
+        /// and hysteresis as its torque passes through zero, or that sticks and breaks
+        /// away from its friction (the sixth separately written model's arms: 25 um over
+        /// 40 ms at a steady 34 mm/s, back over 35). Each bump is a smooth push of 50
+        /// to 100 ms (a raised cosine) along one joint's own direction of motion, either
+        /// way, of a third of this to all of it, as the loops' stiffness holds it. The
+        /// envelope's drives do not bump (and draw nothing for it); `--range
+        /// plant.drive_bump=1e-5..3e-5` gives a run drives that do.
+        drive_bump: "m" = 0.0, [0.0, 0.0; beyond 1e-4];
+        /// How often the drive bumps the tip, on average: at random times, independently.
+        drive_bump_rate: "1/s" = 1.0, [1.0, 1.0];
     }
 }
 
@@ -713,10 +742,11 @@ pub fn specs_markdown() -> String {
             },
             fmt_num(p.min),
             fmt_num(p.max),
-            match p.draw {
-                Draw::Uniform => "",
-                Draw::Log => " (log)",
-                Draw::EitherSign => ")",
+            match (p.draw, p.beyond) {
+                (Draw::EitherSign, _) => ")".into(),
+                (_, Some(reach)) => format!(" (not drawn; a range up to {})", fmt_num(reach)),
+                (Draw::Uniform, None) => String::new(),
+                (Draw::Log, None) => " (log)".into(),
             },
             p.doc.trim().replace("  ", " ")
         ));
