@@ -382,9 +382,7 @@ fn every_parameter_at_the_ends_of_its_reach_runs() {
             "free_motion" => Scenario::FreeMotion,
             _ => Scenario::ContactHard5,
         };
-        let reach = p
-            .beyond
-            .unwrap_or(sim::params::RANGE_REACH * p.min.abs().max(p.max.abs()));
+        let reach = p.reach();
         let low = if p.min > 0.0 {
             p.min / sim::params::RANGE_REACH
         } else if p.min >= 0.0 || p.draw == sim::params::Draw::EitherSign {

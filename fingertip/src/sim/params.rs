@@ -37,6 +37,15 @@ pub struct ParamSpec {
     pub doc: &'static str,
 }
 
+impl ParamSpec {
+    /// The largest magnitude a [`ParamRange`] on this parameter may reach: its
+    /// [`ParamSpec::beyond`], else [`RANGE_REACH`] times the envelope's larger bound.
+    pub fn reach(&self) -> f64 {
+        self.beyond
+            .unwrap_or(RANGE_REACH * self.min.abs().max(self.max.abs()))
+    }
+}
+
 /// How a randomized run draws a parameter from its range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Draw {
@@ -156,17 +165,12 @@ impl ParamRange {
                 "{self}: the bounds must be finite numbers, min <= max"
             ));
         }
-        let (reach, why) = match spec.beyond {
-            Some(reach) => (
-                reach,
-                "the reach of a parameter the envelope does not draw".to_string(),
-            ),
-            None => (
-                RANGE_REACH * spec.min.abs().max(spec.max.abs()),
-                format!("{RANGE_REACH} times the envelope's larger bound"),
-            ),
-        };
+        let reach = spec.reach();
         if lo < -reach || hi > reach {
+            let why = match spec.beyond {
+                Some(_) => "the reach of a parameter the envelope does not draw".to_string(),
+                None => format!("{RANGE_REACH} times the envelope's larger bound"),
+            };
             return Err(format!(
                 "{self}: the bounds must stay within +-{reach} ({why}; the envelope's {} .. {})",
                 spec.min, spec.max
