@@ -595,10 +595,13 @@ pub enum StageKind {
         watch: u8,
         watch_above: i32,
     },
-    /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`].
+    /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`]. It starts
+    /// at the first sample or, `from_zero`, at zero: the same output for an input that is
+    /// never negative ([`Stage::compile`] chooses it there), without a flag to keep.
     Envelope {
         input: u8,
         alpha: u32,
+        from_zero: bool,
     },
     /// The input minus its low-pass, `alpha` and `warm` as for [`StageKind::LowPass`]
     /// (`warm` derived from `alpha`, not carried in an image).
@@ -670,7 +673,8 @@ pub(crate) struct StageState {
     /// A window's next history position to overwrite, relative to the feature's offset; a
     /// filter's samples seen while it warms up (0: none yet; the first one primes it).
     pos: u16,
-    /// Whether an envelope or a rate has seen a sample; a window's: whether it has filled.
+    /// Whether an envelope starting at its first sample, or a rate, has seen a sample; a
+    /// window's: whether it has filled.
     primed: bool,
 }
 
@@ -780,12 +784,14 @@ const WARM_LIMIT: u16 = u16::MAX;
 impl Stage {
     /// Compiles a stage whose inputs are already resolved to slots. `pool_used` is the STE
     /// history taken by earlier features and grows by this feature's window; tapered
-    /// window weights are written into `weights`.
+    /// window weights are written into `weights`. `never_negative` tells which slots hold
+    /// a value that is never below zero ([`Stage::never_negative`] of earlier features).
     pub fn compile(
         spec: &StageSpec<u8>,
         rate_hz: f32,
         pool_used: &mut usize,
         weights: &mut [u32; WINDOW_POOL],
+        never_negative: impl Fn(u8) -> bool,
     ) -> Result<Stage, StageError> {
         Ok(Stage(match *spec {
             StageSpec::Raw { input } => StageKind::Raw(input),
@@ -845,6 +851,7 @@ impl Stage {
             StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
+                from_zero: never_negative(input),
             },
             StageSpec::HighPass { input, cutoff_hz } => {
                 let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
@@ -975,12 +982,20 @@ impl Stage {
                 }
                 low_pass(st, get(input), alpha, longer)
             }
-            StageKind::Envelope { input, alpha } => {
+            StageKind::Envelope {
+                input,
+                alpha,
+                from_zero,
+            } => {
                 let x = get(input);
                 // Compared at the state's full resolution, not the output's: an input
-                // between the two decays the state instead of snapping it down.
-                if !st.primed || i64::from(x) << 32 >= st.acc {
-                    st.primed = true;
+                // between the two decays the state instead of snapping it down. From zero,
+                // generated code keeps no flag: the first sample of an input that is never
+                // negative lifts the state at once, as priming would.
+                if (!from_zero && !st.primed) || i64::from(x) << 32 >= st.acc {
+                    if !from_zero {
+                        st.primed = true;
+                    }
                     st.acc = i64::from(x) << 32;
                 } else {
                     filter_step(st, x, alpha);
@@ -1179,6 +1194,24 @@ fn window_recip(window: u16) -> u32 {
 }
 
 impl Stage {
+    /// Whether the stage's output is never negative, given which of its input slots hold
+    /// values that never are: an absolute value, a positive part, a magnitude, an STE; an
+    /// envelope or a gate of such a value (a leak lies within [0, 1]); a difference `a −
+    /// gain · b` of two such values with a gain of at most zero, which adds.
+    pub fn never_negative(&self, input_never_negative: impl Fn(u8) -> bool) -> bool {
+        match self.0 {
+            StageKind::Abs(_) | StageKind::Positive(_) | StageKind::Magnitude(..) => true,
+            StageKind::Ste { .. } => true,
+            StageKind::Envelope { input, .. } | StageKind::Gate { input, .. } => {
+                input_never_negative(input)
+            }
+            StageKind::Difference { a, b, gain } => {
+                gain <= 0 && input_never_negative(a) && input_never_negative(b)
+            }
+            _ => false,
+        }
+    }
+
     /// Appends this item to a detector image.
     pub fn write_image(&self, w: &mut impl Sink) {
         match self.0 {
@@ -1227,8 +1260,18 @@ impl Stage {
                 w.u8(input);
                 w.u32(alpha);
             }
-            StageKind::Envelope { input, alpha } => {
-                w.u8(StageTag::Envelope as u8);
+            StageKind::Envelope {
+                input,
+                alpha,
+                from_zero,
+            } => {
+                // Starting at the first sample, the encoding images had before either.
+                let tag = if from_zero {
+                    StageTag::EnvelopeFromZero
+                } else {
+                    StageTag::Envelope
+                };
+                w.u8(tag as u8);
                 w.u8(input);
                 w.u32(alpha);
             }
@@ -1346,9 +1389,10 @@ impl Stage {
                     warm: mean_gain_samples(alpha),
                 }
             }
-            Some(StageTag::Envelope) => StageKind::Envelope {
+            Some(tag @ (StageTag::Envelope | StageTag::EnvelopeFromZero)) => StageKind::Envelope {
                 input: r.u8()?,
                 alpha: r.u32()?,
+                from_zero: matches!(tag, StageTag::EnvelopeFromZero),
             },
             Some(StageTag::Cancel) => {
                 let (input, motion, alpha) = (r.u8()?, r.u8()?, r.u32()?);
@@ -1529,10 +1573,11 @@ enum StageTag {
     Positive = 13,
     LowPassLonger = 14,
     GateBelow = 15,
+    EnvelopeFromZero = 16,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 16] = [
+    const ALL: [StageTag; 17] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1549,6 +1594,7 @@ impl StageTag {
         StageTag::Positive,
         StageTag::LowPassLonger,
         StageTag::GateBelow,
+        StageTag::EnvelopeFromZero,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1585,9 +1631,14 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                     "HighPass {{ input: {input}, alpha: {alpha}, warm: {warm} }}"
                 )
             }
-            StageKind::Envelope { input, alpha } => {
-                write!(f, "Envelope {{ input: {input}, alpha: {alpha} }}")
-            }
+            StageKind::Envelope {
+                input,
+                alpha,
+                from_zero,
+            } => write!(
+                f,
+                "Envelope {{ input: {input}, alpha: {alpha}, from_zero: {from_zero} }}"
+            ),
             StageKind::Cancel {
                 input,
                 motion,
@@ -1961,7 +2012,8 @@ mod tests {
     fn run(spec: StageSpec<u8>, inputs: &[&[f64]]) -> Vec<f64> {
         let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
-        let stage = Stage::compile(&spec, 1000.0, &mut used, &mut weights).expect("valid stage");
+        let stage =
+            Stage::compile(&spec, 1000.0, &mut used, &mut weights, |_| false).expect("valid stage");
         let mut st = StageState::default();
         let mut ring = [0u64; WINDOW_POOL];
         (0..inputs[0].len())
@@ -2236,7 +2288,7 @@ mod tests {
         };
         let compile = |spec| {
             let mut weights = [0u32; WINDOW_POOL];
-            Stage::compile(&spec, 1000.0, &mut 0, &mut weights).expect("valid stage")
+            Stage::compile(&spec, 1000.0, &mut 0, &mut weights, |_| false).expect("valid stage")
         };
         let watched = LongerWarmUp {
             feature: 1,
@@ -2467,6 +2519,149 @@ mod tests {
         }
     }
 
+    /// An envelope of an input that is never negative starts at zero, with no flag to
+    /// keep, and gives what one starting at its first sample gives, bit for bit; its image
+    /// reads back as written. A negative first sample shows the difference: the envelope
+    /// from zero decays towards it.
+    #[test]
+    fn an_envelope_of_a_never_negative_input_starts_at_zero_to_the_same_output() {
+        use crate::image::Bytes;
+        let spec = StageSpec::Envelope {
+            input: 0,
+            cutoff_hz: 50.0,
+        };
+        let compile = |never_negative: bool| {
+            let mut weights = [0u32; WINDOW_POOL];
+            Stage::compile(&spec, 1000.0, &mut 0, &mut weights, |_| never_negative)
+                .expect("valid stage")
+        };
+        let (primed, from_zero) = (compile(false), compile(true));
+        assert!(matches!(
+            primed.0,
+            StageKind::Envelope {
+                from_zero: false,
+                ..
+            }
+        ));
+        assert!(matches!(
+            from_zero.0,
+            StageKind::Envelope {
+                from_zero: true,
+                ..
+            }
+        ));
+        let feed = |stage: &Stage, xs: &[i32]| -> Vec<i32> {
+            let (mut st, mut ring) = (StageState::default(), [0u64; WINDOW_POOL]);
+            xs.iter()
+                .map(|&x| {
+                    let mut values = [0i32; MAX_SLOTS];
+                    values[0] = x;
+                    stage.update(&mut st, &values, &mut ring, &[])
+                })
+                .collect()
+        };
+        // Rises, decays, zeros and the largest value, the first sample among them.
+        let mut seed = 0x2545_f491_u32;
+        for first in [0, 1, 7 << 16, i32::MAX] {
+            let xs: Vec<i32> = core::iter::once(first)
+                .chain((0..400).map(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 17;
+                    seed ^= seed << 5;
+                    match seed % 4 {
+                        0 => 0,
+                        1 => i32::MAX,
+                        _ => (seed >> 8) as i32,
+                    }
+                }))
+                .collect();
+            assert_eq!(feed(&primed, &xs), feed(&from_zero, &xs), "first {first}");
+        }
+        let negative = [-5 << 16; 3];
+        let (a, b) = (feed(&primed, &negative), feed(&from_zero, &negative));
+        assert_eq!(a, negative);
+        assert!(b.iter().all(|&y| y < 0 && y > -5 << 16), "{b:?}");
+        assert!(b[1] < b[0], "{b:?}");
+        for stage in [primed, from_zero] {
+            let mut w = Bytes(std::vec::Vec::new());
+            stage.write_image(&mut w);
+            assert_eq!(
+                Stage::read_image(&mut Reader::new(&w.0), MAX_SLOTS),
+                Ok(stage)
+            );
+        }
+    }
+
+    /// What is never negative: absolute values, positive parts, magnitudes, STEs; envelopes
+    /// and gates of such values; differences of two with a gain of at most zero. Not a
+    /// channel's raw value, nor a difference with a positive gain or a signed input.
+    #[test]
+    fn what_is_never_negative() {
+        let nonneg = |slot: u8| slot == 1;
+        let stage = |kind| Stage(kind);
+        for kind in [
+            StageKind::Abs(0),
+            StageKind::Positive(0),
+            StageKind::Magnitude(0, 0),
+            StageKind::Envelope {
+                input: 1,
+                alpha: 1 << 20,
+                from_zero: true,
+            },
+            StageKind::Gate {
+                input: 1,
+                watch: 0,
+                level: 0,
+                below: false,
+                leak: 1 << 15,
+            },
+            StageKind::Difference {
+                a: 1,
+                b: 1,
+                gain: -3 << 16,
+            },
+            StageKind::Difference {
+                a: 1,
+                b: 1,
+                gain: 0,
+            },
+        ] {
+            assert!(stage(kind).never_negative(nonneg), "{kind:?}");
+        }
+        for kind in [
+            StageKind::Raw(1),
+            StageKind::Envelope {
+                input: 0,
+                alpha: 1 << 20,
+                from_zero: false,
+            },
+            StageKind::Gate {
+                input: 0,
+                watch: 1,
+                level: 0,
+                below: false,
+                leak: 0,
+            },
+            StageKind::Difference {
+                a: 1,
+                b: 1,
+                gain: 1 << 16,
+            },
+            StageKind::Difference {
+                a: 1,
+                b: 0,
+                gain: -1 << 16,
+            },
+            StageKind::Difference {
+                a: 0,
+                b: 1,
+                gain: -1 << 16,
+            },
+        ] {
+            assert!(!stage(kind).never_negative(nonneg), "{kind:?}");
+        }
+    }
+
     /// An image's gate whose leak is out of [0, 1] is refused, naming it; one within it
     /// reads back as written, shut on the same side of its level.
     #[test]
@@ -2503,7 +2698,7 @@ mod tests {
     fn bad_stage_parameters() {
         let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
-        let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights);
+        let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights, |_| false);
         assert_eq!(
             compile(StageSpec::LowPass {
                 input: 0,
