@@ -336,58 +336,62 @@ fn a_tip_that_comes_back_onto_its_path_is_no_slow_collision() {
 /// back (`plant.drive_bump`): smoothed but uncut, a bump each read as a link collision.
 const BUMPED_MINUTES: [u64; 2] = [3_626_650_549_393_848_377, 3_626_650_549_393_848_406];
 
-#[test]
-fn a_drive_that_bumps_the_tip_off_its_path_and_back_is_no_slow_collision() {
-    let bumping = SimOptions {
+/// Minutes of free motion of base seed 100's runs `seeds` with `range` drawn: the default
+/// confirms nothing in any, and the default with `change` made (`what` it then is) a link
+/// collision in each.
+fn minutes_read_as_collisions_only_by(
+    seeds: &[u64],
+    range: &str,
+    change: (&str, &str),
+    what: &str,
+) {
+    let options = SimOptions {
         duration_s: Some(60.0),
-        ranges: vec!["plant.drive_bump=1e-5..3e-5".parse().expect("a range")],
+        ranges: vec![range.parse().expect("a range")],
         ..SimOptions::default()
     };
-    let minutes = runs(Scenario::FreeMotion, BUMPED_MINUTES, &bumping);
+    let minutes = runs(Scenario::FreeMotion, seeds.iter().copied(), &options);
     let default = detector(APPROACH_TOML);
-    let uncut = default_with(HELD, KEPT);
-    for (seed, minute) in BUMPED_MINUTES.iter().zip(&minutes) {
+    let changed = default_with(change.0, change.1);
+    for (seed, minute) in seeds.iter().zip(&minutes) {
         assert_eq!(
             confirmed(&default, minute),
             Vec::<String>::new(),
-            "free motion {seed} on bumping drives"
+            "free motion {seed} with {range}"
         );
         assert!(
-            confirmed_at(&uncut, minute, "link_collision").is_some(),
-            "uncut, free motion {seed} on bumping drives is no link collision either: the test no longer shows what the cut does"
+            confirmed_at(&changed, minute, "link_collision").is_some(),
+            "{what}, free motion {seed} with {range} is no link collision either: the test no longer shows what the cut does"
         );
     }
+}
+
+#[test]
+fn a_drive_that_bumps_the_tip_off_its_path_and_back_is_no_slow_collision() {
+    minutes_read_as_collisions_only_by(
+        &BUMPED_MINUTES,
+        "plant.drive_bump=1e-5..3e-5",
+        (HELD, KEPT),
+        "uncut",
+    );
 }
 
 /// Minutes of long cruises of the tuning seeds (base seed 100, `free_motion.cruise=1..5`),
 /// each with a turn made with a small step of the commanded acceleration on an arm with
 /// slow loops (10 and 13 Hz): the turn leaves the tip 100-330 µm off its usual path, which
 /// the usual path takes in at 1 Hz, and the turn's gate lets the slow path read it again
-/// while 40-70 µm of it are left, shrinking. Cut only where the offset falls below its smoothed value, each
-/// read as a link collision.
+/// while 40-70 µm of it are left, shrinking. Cut only where the offset falls below its
+/// smoothed value, each read as a link collision.
 const CRUISED_MINUTES: [u64; 2] = [3_626_650_549_393_848_493, 3_626_650_549_393_848_550];
 
 #[test]
 fn an_offset_shrinking_after_a_turn_is_no_slow_collision() {
-    let cruising = SimOptions {
-        duration_s: Some(60.0),
-        ranges: vec!["free_motion.cruise=1..5".parse().expect("a range")],
-        ..SimOptions::default()
-    };
-    let minutes = runs(Scenario::FreeMotion, CRUISED_MINUTES, &cruising);
-    let default = detector(APPROACH_TOML);
-    let unreturned = default_with(HELD, UNRETURNED);
-    for (seed, minute) in CRUISED_MINUTES.iter().zip(&minutes) {
-        assert_eq!(
-            confirmed(&default, minute),
-            Vec::<String>::new(),
-            "a long cruise {seed}"
-        );
-        assert!(
-            confirmed_at(&unreturned, minute, "link_collision").is_some(),
-            "cut only where the offset falls below its smoothed value, the long cruise {seed} is no link collision either: the test no longer shows what the cut from the top does"
-        );
-    }
+    minutes_read_as_collisions_only_by(
+        &CRUISED_MINUTES,
+        "free_motion.cruise=1..5",
+        (HELD, UNRETURNED),
+        "cut only where the offset falls below its smoothed value",
+    );
 }
 
 /// A command speeding up from 20 mm/s by `peak` × `ramp` / 2 from 100 ms on, over `ramp`
