@@ -1195,16 +1195,16 @@ fn window_recip(window: u16) -> u32 {
 
 impl Stage {
     /// Whether the stage's output is never negative, given which of its input slots hold
-    /// values that never are: an absolute value, a positive part, a magnitude, an STE; an
-    /// envelope or a gate of such a value (a leak lies within [0, 1]); a difference `a −
-    /// gain · b` of two such values with a gain of at most zero, which adds.
+    /// values that never are: an absolute value, a positive part, a magnitude, an STE; a
+    /// copy, an envelope or a gate of such a value (a leak lies within [0, 1]); a difference
+    /// `a − gain · b` of two such values with a gain of at most zero, which adds.
     pub fn never_negative(&self, input_never_negative: impl Fn(u8) -> bool) -> bool {
         match self.0 {
             StageKind::Abs(_) | StageKind::Positive(_) | StageKind::Magnitude(..) => true,
             StageKind::Ste { .. } => true,
-            StageKind::Envelope { input, .. } | StageKind::Gate { input, .. } => {
-                input_never_negative(input)
-            }
+            StageKind::Raw(input)
+            | StageKind::Envelope { input, .. }
+            | StageKind::Gate { input, .. } => input_never_negative(input),
             StageKind::Difference { a, b, gain } => {
                 gain <= 0 && input_never_negative(a) && input_never_negative(b)
             }
@@ -2592,9 +2592,10 @@ mod tests {
         }
     }
 
-    /// What is never negative: absolute values, positive parts, magnitudes, STEs; envelopes
-    /// and gates of such values; differences of two with a gain of at most zero. Not a
-    /// channel's raw value, nor a difference with a positive gain or a signed input.
+    /// What is never negative: absolute values, positive parts, magnitudes, STEs; copies,
+    /// envelopes and gates of such values; differences of two with a gain of at most zero.
+    /// Not a copy of a signed value, nor a difference with a positive gain or a signed
+    /// input.
     #[test]
     fn what_is_never_negative() {
         let nonneg = |slot: u8| slot == 1;
@@ -2603,6 +2604,7 @@ mod tests {
             StageKind::Abs(0),
             StageKind::Positive(0),
             StageKind::Magnitude(0, 0),
+            StageKind::Raw(1),
             StageKind::Envelope {
                 input: 1,
                 alpha: 1 << 20,
@@ -2629,7 +2631,7 @@ mod tests {
             assert!(stage(kind).never_negative(nonneg), "{kind:?}");
         }
         for kind in [
-            StageKind::Raw(1),
+            StageKind::Raw(0),
             StageKind::Envelope {
                 input: 0,
                 alpha: 1 << 20,
