@@ -1200,8 +1200,10 @@ impl Stage {
     /// `a − gain · b` of two such values with a gain of at most zero, which adds.
     pub fn never_negative(&self, input_never_negative: impl Fn(u8) -> bool) -> bool {
         match self.0 {
-            StageKind::Abs(_) | StageKind::Positive(_) | StageKind::Magnitude(..) => true,
-            StageKind::Ste { .. } => true,
+            StageKind::Abs(_)
+            | StageKind::Positive(_)
+            | StageKind::Magnitude(..)
+            | StageKind::Ste { .. } => true,
             StageKind::Raw(input)
             | StageKind::Envelope { input, .. }
             | StageKind::Gate { input, .. } => input_never_negative(input),
