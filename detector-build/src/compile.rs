@@ -301,8 +301,6 @@ impl Compiled {
 
     fn add_features(&mut self, config: &Config) -> Result<(), ConfigError> {
         let mut pool_used = 0;
-        // Whether each feature so far is never negative.
-        let mut nonneg: Vec<bool> = Vec::with_capacity(config.features.len());
         for (k, f) in config.features.iter().enumerate() {
             let item = || Item::Feature(f.name.clone());
             let mut deps: ChannelMask = 0;
@@ -315,22 +313,8 @@ impl Compiled {
                     }
                     None => err(item(), Problem::UnknownInput(name.clone())),
                 })?;
-            // Channels may read below zero; a feature as `Stage::never_negative` says.
-            let never_negative = |slot: u8| {
-                usize::from(slot)
-                    .checked_sub(MAX_CHANNELS)
-                    .and_then(|j| nonneg.get(j))
-                    .is_some_and(|&n| n)
-            };
-            let stage = Stage::compile(
-                &resolved,
-                self.rate_hz,
-                &mut pool_used,
-                &mut self.taps,
-                never_negative,
-            )
-            .or_else(|e| err(item(), Problem::Stage(e)))?;
-            nonneg.push(stage.never_negative(never_negative));
+            let stage = Stage::compile(&resolved, self.rate_hz, &mut pool_used, &mut self.taps)
+                .or_else(|e| err(item(), Problem::Stage(e)))?;
             if let Some(m) = self.slot_channels.get_mut(MAX_CHANNELS + k) {
                 *m = deps;
             }

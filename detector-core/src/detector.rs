@@ -345,9 +345,13 @@ impl Detector {
 
     /// A fresh state: features empty, first phase active, no level up.
     pub fn new_state(&self) -> State {
+        let mut stages = [StageState::default(); MAX_FEATURES];
+        for (st, stage) in stages.iter_mut().zip(&self.stages) {
+            *st = stage.fresh_state();
+        }
         State {
             values: [0; MAX_SLOTS],
-            stages: [StageState::default(); MAX_FEATURES],
+            stages,
             ring: [0; WINDOW_POOL],
             psi: [0; MAX_PSI],
             events: [EventState::default(); MAX_EVENTS],

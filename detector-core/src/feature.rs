@@ -596,12 +596,11 @@ pub enum StageKind {
         watch_above: i32,
     },
     /// Up at once, down as a low-pass, `alpha` as for [`StageKind::LowPass`]. It starts
-    /// at the first sample or, `from_zero`, at zero: the same output for an input that is
-    /// never negative ([`Stage::compile`] chooses it there), without a flag to keep.
+    /// at its first sample, which lifts a fresh state ([`Stage::fresh_state`]) at once:
+    /// no flag to keep.
     Envelope {
         input: u8,
         alpha: u32,
-        from_zero: bool,
     },
     /// The input minus its low-pass, `alpha` and `warm` as for [`StageKind::LowPass`]
     /// (`warm` derived from `alpha`, not carried in an image).
@@ -673,9 +672,23 @@ pub(crate) struct StageState {
     /// A window's next history position to overwrite, relative to the feature's offset; a
     /// filter's samples seen while it warms up (0: none yet; the first one primes it).
     pos: u16,
-    /// Whether an envelope starting at its first sample, or a rate, has seen a sample; a
-    /// window's: whether it has filled.
+    /// Whether a rate has seen a sample; a window's: whether it has filled.
     primed: bool,
+}
+
+impl Stage {
+    /// The stage's state before its first sample: all zero, except an envelope's, which
+    /// holds the least value a state can, so that its first sample, whatever it is, lifts
+    /// it at once.
+    pub(crate) fn fresh_state(&self) -> StageState {
+        match self.0 {
+            StageKind::Envelope { .. } => StageState {
+                acc: i64::MIN,
+                ..StageState::default()
+            },
+            _ => StageState::default(),
+        }
+    }
 }
 
 impl StageState {
@@ -784,14 +797,12 @@ const WARM_LIMIT: u16 = u16::MAX;
 impl Stage {
     /// Compiles a stage whose inputs are already resolved to slots. `pool_used` is the STE
     /// history taken by earlier features and grows by this feature's window; tapered
-    /// window weights are written into `weights`. `never_negative` tells which slots hold
-    /// a value that is never below zero ([`Stage::never_negative`] of earlier features).
+    /// window weights are written into `weights`.
     pub fn compile(
         spec: &StageSpec<u8>,
         rate_hz: f32,
         pool_used: &mut usize,
         weights: &mut [u32; WINDOW_POOL],
-        never_negative: impl Fn(u8) -> bool,
     ) -> Result<Stage, StageError> {
         Ok(Stage(match *spec {
             StageSpec::Raw { input } => StageKind::Raw(input),
@@ -851,7 +862,6 @@ impl Stage {
             StageSpec::Envelope { input, cutoff_hz } => StageKind::Envelope {
                 input,
                 alpha: low_pass_alpha(rate_hz, cutoff_hz)?,
-                from_zero: never_negative(input),
             },
             StageSpec::HighPass { input, cutoff_hz } => {
                 let alpha = low_pass_alpha(rate_hz, cutoff_hz)?;
@@ -982,20 +992,11 @@ impl Stage {
                 }
                 low_pass(st, get(input), alpha, longer)
             }
-            StageKind::Envelope {
-                input,
-                alpha,
-                from_zero,
-            } => {
+            StageKind::Envelope { input, alpha } => {
                 let x = get(input);
                 // Compared at the state's full resolution, not the output's: an input
-                // between the two decays the state instead of snapping it down. From zero,
-                // generated code keeps no flag: the first sample of an input that is never
-                // negative lifts the state at once, as priming would.
-                if (!from_zero && !st.primed) || i64::from(x) << 32 >= st.acc {
-                    if !from_zero {
-                        st.primed = true;
-                    }
+                // between the two decays the state instead of snapping it down.
+                if i64::from(x) << 32 >= st.acc {
                     st.acc = i64::from(x) << 32;
                 } else {
                     filter_step(st, x, alpha);
@@ -1194,26 +1195,6 @@ fn window_recip(window: u16) -> u32 {
 }
 
 impl Stage {
-    /// Whether the stage's output is never negative, given which of its input slots hold
-    /// values that never are: an absolute value, a positive part, a magnitude, an STE; a
-    /// copy, an envelope or a gate of such a value (a leak lies within [0, 1]); a difference
-    /// `a − gain · b` of two such values with a gain of at most zero, which adds.
-    pub fn never_negative(&self, input_never_negative: impl Fn(u8) -> bool) -> bool {
-        match self.0 {
-            StageKind::Abs(_)
-            | StageKind::Positive(_)
-            | StageKind::Magnitude(..)
-            | StageKind::Ste { .. } => true,
-            StageKind::Raw(input)
-            | StageKind::Envelope { input, .. }
-            | StageKind::Gate { input, .. } => input_never_negative(input),
-            StageKind::Difference { a, b, gain } => {
-                gain <= 0 && input_never_negative(a) && input_never_negative(b)
-            }
-            _ => false,
-        }
-    }
-
     /// Appends this item to a detector image.
     pub fn write_image(&self, w: &mut impl Sink) {
         match self.0 {
@@ -1262,18 +1243,8 @@ impl Stage {
                 w.u8(input);
                 w.u32(alpha);
             }
-            StageKind::Envelope {
-                input,
-                alpha,
-                from_zero,
-            } => {
-                // Starting at the first sample, the encoding images had before either.
-                let tag = if from_zero {
-                    StageTag::EnvelopeFromZero
-                } else {
-                    StageTag::Envelope
-                };
-                w.u8(tag as u8);
+            StageKind::Envelope { input, alpha } => {
+                w.u8(StageTag::Envelope as u8);
                 w.u8(input);
                 w.u32(alpha);
             }
@@ -1391,10 +1362,9 @@ impl Stage {
                     warm: mean_gain_samples(alpha),
                 }
             }
-            Some(tag @ (StageTag::Envelope | StageTag::EnvelopeFromZero)) => StageKind::Envelope {
+            Some(StageTag::Envelope) => StageKind::Envelope {
                 input: r.u8()?,
                 alpha: r.u32()?,
-                from_zero: matches!(tag, StageTag::EnvelopeFromZero),
             },
             Some(StageTag::Cancel) => {
                 let (input, motion, alpha) = (r.u8()?, r.u8()?, r.u32()?);
@@ -1575,11 +1545,10 @@ enum StageTag {
     Positive = 13,
     LowPassLonger = 14,
     GateBelow = 15,
-    EnvelopeFromZero = 16,
 }
 
 impl StageTag {
-    const ALL: [StageTag; 17] = [
+    const ALL: [StageTag; 16] = [
         StageTag::Raw,
         StageTag::Abs,
         StageTag::LowPass,
@@ -1596,7 +1565,6 @@ impl StageTag {
         StageTag::Positive,
         StageTag::LowPassLonger,
         StageTag::GateBelow,
-        StageTag::EnvelopeFromZero,
     ];
 
     fn from_byte(b: u8) -> Option<StageTag> {
@@ -1633,14 +1601,9 @@ impl core::fmt::Display for crate::expr::Rust<'_, Stage> {
                     "HighPass {{ input: {input}, alpha: {alpha}, warm: {warm} }}"
                 )
             }
-            StageKind::Envelope {
-                input,
-                alpha,
-                from_zero,
-            } => write!(
-                f,
-                "Envelope {{ input: {input}, alpha: {alpha}, from_zero: {from_zero} }}"
-            ),
+            StageKind::Envelope { input, alpha } => {
+                write!(f, "Envelope {{ input: {input}, alpha: {alpha} }}")
+            }
             StageKind::Cancel {
                 input,
                 motion,
@@ -2014,9 +1977,8 @@ mod tests {
     fn run(spec: StageSpec<u8>, inputs: &[&[f64]]) -> Vec<f64> {
         let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
-        let stage =
-            Stage::compile(&spec, 1000.0, &mut used, &mut weights, |_| false).expect("valid stage");
-        let mut st = StageState::default();
+        let stage = Stage::compile(&spec, 1000.0, &mut used, &mut weights).expect("valid stage");
+        let mut st = stage.fresh_state();
         let mut ring = [0u64; WINDOW_POOL];
         (0..inputs[0].len())
             .map(|k| {
@@ -2290,7 +2252,7 @@ mod tests {
         };
         let compile = |spec| {
             let mut weights = [0u32; WINDOW_POOL];
-            Stage::compile(&spec, 1000.0, &mut 0, &mut weights, |_| false).expect("valid stage")
+            Stage::compile(&spec, 1000.0, &mut 0, &mut weights).expect("valid stage")
         };
         let watched = LongerWarmUp {
             feature: 1,
@@ -2521,39 +2483,19 @@ mod tests {
         }
     }
 
-    /// An envelope of an input that is never negative starts at zero, with no flag to
-    /// keep, and gives what one starting at its first sample gives, bit for bit; its image
-    /// reads back as written. A negative first sample shows the difference: the envelope
-    /// from zero decays towards it.
+    /// An envelope starts at its first sample, whatever its sign, with no flag: a fresh
+    /// state lifts to it at once and decays from there. From an all-zero state instead, a
+    /// negative first sample would be lost.
     #[test]
-    fn an_envelope_of_a_never_negative_input_starts_at_zero_to_the_same_output() {
-        use crate::image::Bytes;
+    fn an_envelope_starts_at_its_first_sample_whatever_its_sign() {
         let spec = StageSpec::Envelope {
             input: 0,
             cutoff_hz: 50.0,
         };
-        let compile = |never_negative: bool| {
-            let mut weights = [0u32; WINDOW_POOL];
-            Stage::compile(&spec, 1000.0, &mut 0, &mut weights, |_| never_negative)
-                .expect("valid stage")
-        };
-        let (primed, from_zero) = (compile(false), compile(true));
-        assert!(matches!(
-            primed.0,
-            StageKind::Envelope {
-                from_zero: false,
-                ..
-            }
-        ));
-        assert!(matches!(
-            from_zero.0,
-            StageKind::Envelope {
-                from_zero: true,
-                ..
-            }
-        ));
-        let feed = |stage: &Stage, xs: &[i32]| -> Vec<i32> {
-            let (mut st, mut ring) = (StageState::default(), [0u64; WINDOW_POOL]);
+        let mut weights = [0u32; WINDOW_POOL];
+        let stage = Stage::compile(&spec, 1000.0, &mut 0, &mut weights).expect("valid stage");
+        let feed = |mut st: StageState, xs: &[i32]| -> Vec<i32> {
+            let mut ring = [0u64; WINDOW_POOL];
             xs.iter()
                 .map(|&x| {
                     let mut values = [0i32; MAX_SLOTS];
@@ -2562,108 +2504,22 @@ mod tests {
                 })
                 .collect()
         };
-        // Rises, decays, zeros and the largest value, the first sample among them.
-        let mut seed = 0x2545_f491_u32;
-        for first in [0, 1, 7 << 16, i32::MAX] {
-            let xs: Vec<i32> = core::iter::once(first)
-                .chain((0..400).map(|_| {
-                    seed ^= seed << 13;
-                    seed ^= seed >> 17;
-                    seed ^= seed << 5;
-                    match seed % 4 {
-                        0 => 0,
-                        1 => i32::MAX,
-                        _ => (seed >> 8) as i32,
-                    }
-                }))
-                .collect();
-            assert_eq!(feed(&primed, &xs), feed(&from_zero, &xs), "first {first}");
+        for first in [i32::MIN, -5 << 16, -1, 0, 1, 7 << 16, i32::MAX] {
+            // Then the least value, which only decays it.
+            let ys = feed(stage.fresh_state(), &[first, i32::MIN, i32::MIN]);
+            assert_eq!(ys[0], first);
+            if first > i32::MIN + 1 {
+                assert!(ys[1] < first && ys[1] > i32::MIN && ys[2] < ys[1], "{ys:?}");
+            }
         }
-        let negative = [-5 << 16; 3];
-        let (a, b) = (feed(&primed, &negative), feed(&from_zero, &negative));
-        assert_eq!(a, negative);
-        assert!(b.iter().all(|&y| y < 0 && y > -5 << 16), "{b:?}");
-        assert!(b[1] < b[0], "{b:?}");
-        for stage in [primed, from_zero] {
-            let mut w = Bytes(std::vec::Vec::new());
-            stage.write_image(&mut w);
-            assert_eq!(
-                Stage::read_image(&mut Reader::new(&w.0), MAX_SLOTS),
-                Ok(stage)
-            );
-        }
-    }
-
-    /// What is never negative: absolute values, positive parts, magnitudes, STEs; copies,
-    /// envelopes and gates of such values; differences of two with a gain of at most zero.
-    /// Not a copy of a signed value, nor a difference with a positive gain or a signed
-    /// input.
-    #[test]
-    fn what_is_never_negative() {
-        let nonneg = |slot: u8| slot == 1;
-        let stage = |kind| Stage(kind);
-        for kind in [
-            StageKind::Abs(0),
-            StageKind::Positive(0),
-            StageKind::Magnitude(0, 0),
-            StageKind::Raw(1),
-            StageKind::Envelope {
-                input: 1,
-                alpha: 1 << 20,
-                from_zero: true,
-            },
-            StageKind::Gate {
-                input: 1,
-                watch: 0,
-                level: 0,
-                below: false,
-                leak: 1 << 15,
-            },
-            StageKind::Difference {
-                a: 1,
-                b: 1,
-                gain: -3 << 16,
-            },
-            StageKind::Difference {
-                a: 1,
-                b: 1,
-                gain: 0,
-            },
-        ] {
-            assert!(stage(kind).never_negative(nonneg), "{kind:?}");
-        }
-        for kind in [
-            StageKind::Raw(0),
-            StageKind::Envelope {
-                input: 0,
-                alpha: 1 << 20,
-                from_zero: false,
-            },
-            StageKind::Gate {
-                input: 0,
-                watch: 1,
-                level: 0,
-                below: false,
-                leak: 0,
-            },
-            StageKind::Difference {
-                a: 1,
-                b: 1,
-                gain: 1 << 16,
-            },
-            StageKind::Difference {
-                a: 1,
-                b: 0,
-                gain: -1 << 16,
-            },
-            StageKind::Difference {
-                a: 0,
-                b: 1,
-                gain: -1 << 16,
-            },
-        ] {
-            assert!(!stage(kind).never_negative(nonneg), "{kind:?}");
-        }
+        assert_eq!(feed(stage.fresh_state(), &[i32::MIN; 3]), [i32::MIN; 3]);
+        let from_zero = feed(StageState::default(), &[-5 << 16]);
+        assert!(from_zero[0] > -5 << 16, "{from_zero:?}");
+        // Every other stage starts all zero.
+        assert_eq!(
+            Stage(StageKind::Abs(0)).fresh_state(),
+            StageState::default()
+        );
     }
 
     /// An image's gate whose leak is out of [0, 1] is refused, naming it; one within it
@@ -2702,7 +2558,7 @@ mod tests {
     fn bad_stage_parameters() {
         let mut weights = [0u32; WINDOW_POOL];
         let mut used = 0;
-        let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights, |_| false);
+        let mut compile = |s| Stage::compile(&s, 1000.0, &mut used, &mut weights);
         assert_eq!(
             compile(StageSpec::LowPass {
                 input: 0,

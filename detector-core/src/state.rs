@@ -526,10 +526,11 @@ impl State {
     }
 }
 
-/// The first bytes of a saved state: its format, version 6 (128 features; filter states
-/// holding their output times 2³², primed by their sample count; levels keeping whether
-/// their early dwell's feature has shown).
-pub const SAVED_MAGIC: [u8; 4] = *b"FTS6";
+/// The first bytes of a saved state: its format, version 7 (128 features; filter states
+/// holding their output times 2³², primed by their sample count, an envelope that has seen
+/// no sample by the least value; levels keeping whether their early dwell's feature has
+/// shown).
+pub const SAVED_MAGIC: [u8; 4] = *b"FTS7";
 
 /// Bytes of an event's saved state: rising, onset, and each level's up, run and shown.
 const EVENT_BYTES: usize = 1 + 4 + 2 * (1 + 2 + 1);
