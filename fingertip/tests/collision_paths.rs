@@ -25,7 +25,7 @@ use fingertip::trace::Trace;
 mod support;
 use support::{
     confirmed, confirmed_at, confirming_where_right, default_with, default_with_each, detector,
-    force_noise, padded_posts, runs, steady_motion, times, trace_of,
+    force_noise, minutes_read_only_by, padded_posts, steady_motion, times, trace_of,
 };
 
 /// The default's slow link-collision term, as written in `configs/approach.toml`.
@@ -336,43 +336,14 @@ fn a_tip_that_comes_back_onto_its_path_is_no_slow_collision() {
 /// back (`plant.drive_bump`): smoothed but uncut, a bump each read as a link collision.
 const BUMPED_MINUTES: [u64; 2] = [3_626_650_549_393_848_377, 3_626_650_549_393_848_406];
 
-/// Minutes of free motion of base seed 100's runs `seeds` with `range` drawn: the default
-/// confirms nothing in any, and the default with `change` made (`what` it then is) a link
-/// collision in each.
-fn minutes_read_as_collisions_only_by(
-    seeds: &[u64],
-    range: &str,
-    change: (&str, &str),
-    what: &str,
-) {
-    let options = SimOptions {
-        duration_s: Some(60.0),
-        ranges: vec![range.parse().expect("a range")],
-        ..SimOptions::default()
-    };
-    let minutes = runs(Scenario::FreeMotion, seeds.iter().copied(), &options);
-    let default = detector(APPROACH_TOML);
-    let changed = default_with(change.0, change.1);
-    for (seed, minute) in seeds.iter().zip(&minutes) {
-        assert_eq!(
-            confirmed(&default, minute),
-            Vec::<String>::new(),
-            "free motion {seed} with {range}"
-        );
-        assert!(
-            confirmed_at(&changed, minute, "link_collision").is_some(),
-            "{what}, free motion {seed} with {range} is no link collision either: the test no longer shows what the cut does"
-        );
-    }
-}
-
 #[test]
 fn a_drive_that_bumps_the_tip_off_its_path_and_back_is_no_slow_collision() {
-    minutes_read_as_collisions_only_by(
+    minutes_read_only_by(
         &BUMPED_MINUTES,
         "plant.drive_bump=1e-5..3e-5",
-        (HELD, KEPT),
+        &default_with(HELD, KEPT),
         "uncut",
+        "link_collision",
     );
 }
 
@@ -386,11 +357,12 @@ const CRUISED_MINUTES: [u64; 2] = [3_626_650_549_393_848_493, 3_626_650_549_393_
 
 #[test]
 fn an_offset_shrinking_after_a_turn_is_no_slow_collision() {
-    minutes_read_as_collisions_only_by(
+    minutes_read_only_by(
         &CRUISED_MINUTES,
         "free_motion.cruise=1..5",
-        (HELD, UNRETURNED),
+        &default_with(HELD, UNRETURNED),
         "cut only where the offset falls below its smoothed value",
+        "link_collision",
     );
 }
 

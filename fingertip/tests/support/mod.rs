@@ -153,6 +153,35 @@ pub fn confirmed_at(detector: &Detector, trace: &Trace, event: &str) -> Option<f
         .map(|d| d.t_s)
 }
 
+/// Minutes of free motion, the runs `seeds` with `range` drawn: the default confirms
+/// nothing in any, and `changed` (`what` it is) confirms `event` in each.
+pub fn minutes_read_only_by(
+    seeds: &[u64],
+    range: &str,
+    changed: &Detector,
+    what: &str,
+    event: &str,
+) {
+    let options = SimOptions {
+        duration_s: Some(60.0),
+        ranges: vec![range.parse().expect("a range")],
+        ..SimOptions::default()
+    };
+    let minutes = runs(Scenario::FreeMotion, seeds.iter().copied(), &options);
+    let default = detector(APPROACH_TOML);
+    for (seed, minute) in seeds.iter().zip(&minutes) {
+        assert_eq!(
+            confirmed(&default, minute),
+            Vec::<String>::new(),
+            "free motion {seed} with {range}"
+        );
+        assert!(
+            confirmed_at(changed, minute, event).is_some(),
+            "{what}, free motion {seed} with {range} confirms no {event} either: the test no longer shows what the change does"
+        );
+    }
+}
+
 /// Whether `detector` gets each of `traces` (runs of `s`) right.
 pub fn right(detector: &Detector, s: Scenario, traces: &[Trace]) -> Vec<bool> {
     outcomes(detector, s, traces)
