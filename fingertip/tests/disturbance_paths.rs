@@ -98,7 +98,7 @@ fn shaken_error_um(t: f64) -> f64 {
 /// The default with `written` in its configuration `instead` (see [`default_with`]), and
 /// its encoder term on the swing back whether or not the tip is held off its path or the
 /// arm struck: an arm that falls behind or is being stopped also moves off its path
-/// without swinging, which the first gate alone would keep from reading as shaken.
+/// without swinging, which either gate alone would keep from reading as shaken.
 fn ungated_with(written: &str, instead: &str) -> Detector {
     default_with_each(&[(ENCODER_TERM, UNHELD_TERM), (written, instead)])
 }
