@@ -468,13 +468,13 @@ fn a_collision_swinging_its_arm_back_unstruck_is_no_disturbance() {
     );
 }
 
-/// The default's disturbance confirmation: 8 ms, or 5 once the arm has lately swung back
-/// onto its path (an early dwell).
-const DISTURBANCE_CONFIRM: &str = "dwell_ms = 8.0, hold_ms = 150.0, early = { feature = \"back_lately\", above = 3.0, dwell_ms = 5.0 } }";
-/// The default's early dwell, on the swing back of the last 16 ms or so.
-const BACK_LATELY: &str = "early = { feature = \"back_lately\", above = 3.0, dwell_ms = 5.0 }";
+/// The default's disturbance dwell: 8 ms ...
+const DISTURBANCE_DWELL: &str = "dwell_ms = 8.0, hold_ms = 150.0";
+/// ... or 5 once the arm has lately swung back onto its path (an early dwell, on the swing
+/// back of the last 16 ms or so).
+const BACK_LATELY: &str = ", early = { feature = \"back_lately\", above = 3.0, dwell_ms = 5.0 }";
 /// The same early dwell on the swing back at the ticks the confidence is up only.
-const BACK_NOW: &str = "early = { feature = \"err_back\", above = 3.0, dwell_ms = 5.0 }";
+const BACK_NOW: &str = ", early = { feature = \"err_back\", above = 3.0, dwell_ms = 5.0 }";
 
 /// Link collisions of the tuning seeds (base seed 100, run seeds as `fingertip evaluate`
 /// names them; stiff obstacles, [`STIFF_OBSTACLES`]) on arms of 1-4 kg, struck on link 2: the link
@@ -507,7 +507,8 @@ fn a_heavy_arms_collision_is_given_the_disturbances_longer_wait() {
         // swung back holds the disturbance down through that allowance alone.
         &default_with_each(&[
             (HELD_BACK, LAG_ANY_TIME),
-            (DISTURBANCE_CONFIRM, "dwell_ms = 5.0, hold_ms = 150.0 }"),
+            (DISTURBANCE_DWELL, "dwell_ms = 5.0, hold_ms = 150.0"),
+            (BACK_LATELY, ""),
         ]),
         &HEAVY_COLLISIONS,
         &heavy,
@@ -522,7 +523,7 @@ fn a_heavy_arms_collision_is_given_the_disturbances_longer_wait() {
 
 #[test]
 fn a_knock_whose_arm_swings_back_is_confirmed_before_the_longer_wait_ends() {
-    let fixed = default_with(DISTURBANCE_CONFIRM, "dwell_ms = 8.0, hold_ms = 150.0 }");
+    let fixed = default_with(BACK_LATELY, "");
     let default = detector(APPROACH_TOML);
     let knocks = runs(Scenario::KnockLink2, 1..101, &SimOptions::default());
     let (mut sooner, mut later) = (0, 0);
